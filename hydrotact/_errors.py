@@ -1,0 +1,16 @@
+"""The one exception type users see.
+
+Every problem with a user's input (a file, a mesh, a parameter) is raised as a
+:class:`HydrotactError` whose message names the file, field or row at fault. The
+command line prints that message on one line and exits with status 2; it never shows
+a traceback for one.
+"""
+
+
+class HydrotactError(ValueError):
+    """A problem with the user's input, with a message that says where it is."""
+
+
+def where(source: str | None) -> str:
+    """Prefix for a message about `source` (a file name or a description), or ''."""
+    return f"{source}: " if source else ""

@@ -1,0 +1,130 @@
+"""The `hydrotact` command: thin wrappers over the library.
+
+Every user error ends in one line, `hydrotact: error: ...`, naming the file, field or
+value at fault, and exit status 2; never a traceback.
+"""
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from . import __version__
+from ._errors import HydrotactError
+
+
+def _length(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="hydrotact",
+        description="Differentiable simulation and system identification for barometric tactile sensors.",
+    )
+    parser.add_argument("--version", action="version", version=f"hydrotact {__version__}")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def source_arguments(sub, what):
+        sub.add_argument("source", metavar=what, help="a built-in sensor (pad5x5, sphere8, ellipsoid8) or a file")
+        sub.add_argument("--edge-length", type=_length, metavar="L", help="target tet edge length in metres (sensors, surfaces)")
+        sub.add_argument("--units", default="m", choices=["m", "mm", "cm", "um"], help="length unit of a surface file (default m)")
+        sub.add_argument("--core-plane", type=_length, metavar="Z", help="the core (bonded) faces lie on the plane z = Z, in --units (default: the lowest z)")
+        sub.add_argument("--json", action="store_true", help="print the report as JSON")
+
+    mesh = commands.add_parser("mesh", help="mesh a sensor or a closed surface; report counts and quality")
+    source_arguments(mesh, "SENSOR_OR_SURFACE_FILE")
+    mesh.add_argument("-o", "--output", type=Path, metavar="MESH.vtu", help="write the mesh (VTK XML, with tags)")
+    mesh.add_argument("--vtk", type=Path, metavar="MESH.vtk", help="write the mesh as legacy ASCII VTK (loads in Drake)")
+    mesh.add_argument("--png", type=Path, metavar="MESH.png", help="render the mesh")
+
+    field = commands.add_parser("field", help="solve the strain field of a sensor or mesh; report on it")
+    source_arguments(field, "SENSOR_OR_MESH")
+    field.add_argument("--modulus", type=_length, default=1e5, metavar="E", help="hydroelastic modulus in Pa (default 1e5)")
+    field.add_argument("--kind", default="laplace", choices=["laplace", "distance"], help="Laplace strain field, or Drake's distance field")
+    field.add_argument("--core-depth", type=_length, metavar="D", help="also fix e = 1 at vertices at least D metres below the free skin")
+    field.add_argument("-o", "--output", type=Path, metavar="FIELD.vtu", help="write the mesh with strain and pressure")
+    field.add_argument("--png", type=Path, metavar="FIELD.png", help="render the pressure field")
+
+    demo = commands.add_parser("demo", help="the built-in demonstration: writes results and pictures to out/")
+    demo.add_argument("-o", "--output", type=Path, default=Path("out"), metavar="DIR")
+    return parser
+
+
+def _print_report(title: str, report: dict, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(report, indent=2))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=title, show_header=False)
+    for key, value in report.items():
+        if isinstance(value, float):
+            value = f"{value:.6g}"
+        table.add_row(key, str(value))
+    Console().print(table)
+
+
+def _run(args) -> None:
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    from ._jobs import load_tet_mesh, run_demo, solve_field
+
+    if args.command == "demo":
+        summary = run_demo(args.output)
+        print(f"hydrotact demo: results in {args.output}/")
+        print(f"  summary: {args.output / 'summary.json'}")
+        for name, sensor in summary["sensors"].items():
+            field = sensor["laplace_field"]
+            print(f"  {name}: {field['num_tets']} tets, field solved in {field['solve_seconds']:.3f} s "
+                  f"({field['cg_iterations']} CG iterations, residual {field['residual_norm']:.1e})")
+            for path in sensor["files"].values():
+                print(f"    {path}")
+        return
+
+    from .mesh import calc_mesh_quality, write_mesh
+
+    mesh = load_tet_mesh(args.source, edge_length=args.edge_length, units=args.units, core_plane_z=args.core_plane)
+    if args.command == "mesh":
+        report = calc_mesh_quality(mesh)
+        if args.output:
+            write_mesh(mesh, args.output)
+        if args.vtk:
+            write_mesh(mesh, args.vtk)
+        if args.png:
+            from .viz import render_mesh
+
+            render_mesh(mesh, args.png, title=args.source)
+        _print_report(f"mesh of {args.source}", report, args.json)
+        return
+
+    strain, report = solve_field(mesh, kind=args.kind, modulus=args.modulus, core_depth=args.core_depth, source=args.source)
+    if args.output:
+        write_mesh(mesh, args.output, point_data={"strain": strain, "pressure_Pa": args.modulus * strain})
+    if args.png:
+        from .viz import render_field
+
+        render_field(mesh, args.modulus * strain, args.png, label="pressure [Pa]", title=f"{args.source}: {args.kind} field")
+    _print_report(f"{args.kind} field of {args.source}", report, args.json)
+
+
+def main(argv=None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        _run(args)
+    except HydrotactError as error:
+        print(f"hydrotact: error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("hydrotact: interrupted", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,76 @@
+"""Off-screen 3-D renders of meshes and fields with pyvista (PNG files)."""
+
+import os
+
+if not os.environ.get("DISPLAY"):
+    # No X server: ask VTK for a headless EGL window rather than failing over to it.
+    os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+
+import numpy as np
+import pyvista as pv
+
+from .._files import atomic_path
+from ..mesh import CORE, FREE, TetMesh, to_pyvista
+
+pv.OFF_SCREEN = True
+_WINDOW = (1200, 900)
+
+
+def _faces_polydata(mesh: TetMesh, tag: int) -> pv.PolyData:
+    faces = mesh.faces_tagged(tag)
+    cells = np.column_stack([np.full(len(faces), 3), faces]).reshape(-1)
+    return pv.PolyData(np.asarray(mesh.vertices, dtype=np.float64) * 1e3, cells)
+
+
+def _view_from(plotter: pv.Plotter, bounds_mm, side: float) -> None:
+    """Look at the box `bounds_mm` from above, from the -y (side=-1) or +y side."""
+    lo, hi = np.asarray(bounds_mm[0::2]), np.asarray(bounds_mm[1::2])
+    centre, size = 0.5 * (lo + hi), float(np.linalg.norm(hi - lo))
+    eye = centre + size * np.array([0.55, 1.5 * side, 0.9])
+    plotter.camera_position = [tuple(eye), tuple(centre), (0.0, 0.0, 1.0)]
+
+
+def _save(plotter: pv.Plotter, path) -> None:
+    with atomic_path(path) as tmp:
+        plotter.screenshot(str(tmp))
+    plotter.close()
+
+
+def render_mesh(mesh: TetMesh, path, title: str = "") -> None:
+    """A PNG of the mesh cut in half by the plane y = centre (whole tets, with their
+    edges, so the inside shows), core faces orange; lengths in mm."""
+    grid = to_pyvista(mesh, scale=1e3)
+    centre = np.asarray(grid.center)
+    plotter = pv.Plotter(off_screen=True, window_size=_WINDOW)
+    plotter.add_mesh(grid.clip(normal="y", origin=centre, crinkle=True), color="lightgrey", show_edges=True, edge_color="dimgrey")
+    core = _faces_polydata(mesh, CORE)
+    if core.n_cells:
+        plotter.add_mesh(core.clip(normal="y", origin=centre), color="orange", label="core (bonded, e = 1)")
+        plotter.add_mesh(_faces_polydata(mesh, FREE).clip(normal="y", origin=centre).extract_feature_edges(), color="black")
+        plotter.add_legend(bcolor="white", size=(0.42, 0.07), loc="upper right", face=None)
+    plotter.add_text(title, font_size=12)
+    plotter.show_bounds(xtitle="x [mm]", ytitle="y [mm]", ztitle="z [mm]", font_size=10)
+    _view_from(plotter, grid.bounds, side=1.0)
+    _save(plotter, path)
+
+
+def render_field(mesh: TetMesh, values, path, *, label: str, title: str = "") -> None:
+    """A PNG of a vertex field on the mesh, clipped by the plane y = centre so the
+    inside shows, with a colour bar titled `label` (which should carry the units)."""
+    grid = to_pyvista(mesh, scale=1e3)
+    grid.point_data[label] = np.asarray(values, dtype=np.float64)
+    centre = np.asarray(grid.center)
+    clipped = grid.clip(normal="y", origin=centre, crinkle=False)
+    plotter = pv.Plotter(off_screen=True, window_size=_WINDOW)
+    plotter.add_mesh(
+        clipped,
+        scalars=label,
+        cmap="viridis",
+        show_edges=False,
+        scalar_bar_args={"title": label, "vertical": True, "fmt": "%.3g", "position_x": 0.72, "title_font_size": 14},
+    )
+    plotter.add_mesh(grid.extract_feature_edges(), color="black", line_width=1)
+    plotter.add_text(title, font_size=12)
+    plotter.show_bounds(xtitle="x [mm]", ytitle="y [mm]", ztitle="z [mm]", font_size=10)
+    _view_from(plotter, grid.bounds, side=1.0)  # the kept half is y < centre: face its cut
+    _save(plotter, path)

@@ -1,0 +1,64 @@
+"""Shared test helpers: finite differences, closed surfaces, running the CLI."""
+
+import subprocess
+import sys
+
+import numpy as np
+import trimesh
+
+
+def central_difference(f, x, direction, step):
+    """(f(x + step d) - f(x - step d)) / (2 step) as a float."""
+    return (float(f(x + step * direction)) - float(f(x - step * direction))) / (2.0 * step)
+
+
+def icosphere(radius=5e-3, subdivisions=3, center=(0.0, 0.0, 0.0)):
+    surface = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
+    surface.apply_translation(center)
+    return surface
+
+
+def box_surface(extents=(6e-3, 6e-3, 3e-3)):
+    surface = trimesh.creation.box(extents=extents)
+    surface.apply_translation([0.0, 0.0, extents[2] / 2])
+    return surface
+
+
+def run_cli(*args, cwd=None):
+    """Run `hydrotact ARGS` in a subprocess; returns CompletedProcess (text)."""
+    return subprocess.run(
+        [sys.executable, "-m", "hydrotact.cli", *map(str, args)],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=600,
+    )
+
+
+def assert_one_line_error(result, *fragments):
+    """The CLI failed with exit 2 and one `hydrotact: error:` line naming `fragments`."""
+    assert result.returncode == 2, (result.returncode, result.stdout, result.stderr)
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("hydrotact: error: "), lines[0]
+    assert "Traceback" not in result.stderr
+    for fragment in fragments:
+        assert fragment in lines[0], (fragment, lines[0])
+
+
+def tet_barycentric(vertices, tets, points):
+    """Barycentric coordinates (num_points, num_tets, 4) of points in every tet."""
+    p = vertices[tets]
+    edges = np.transpose(p[:, 1:] - p[:, :1], (0, 2, 1))  # (T, 3, 3) columns e1, e2, e3
+    inverse = np.linalg.inv(edges)
+    local = np.einsum("tij,ptj->pti", inverse, points[:, None, :] - p[None, :, 0])
+    return np.concatenate([1.0 - local.sum(-1, keepdims=True), local], axis=-1)
+
+
+def locate(vertices, tets, points, tolerance=1e-9):
+    """Index of a tet containing each point and the point's barycentric coordinates."""
+    bary = tet_barycentric(vertices, tets, points)
+    inside = np.all(bary >= -tolerance, axis=-1)
+    assert inside.any(axis=1).all(), "a point lies outside the mesh"
+    index = np.argmax(inside, axis=1)
+    return index, bary[np.arange(len(points)), index]

@@ -1,0 +1,72 @@
+"""The `hydrotact` command line and the demo job."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+from helpers import box_surface, run_cli
+
+from hydrotact.mesh import CORE, read_mesh
+
+
+def test_help_lists_the_commands():
+    result = run_cli("--help")
+    assert result.returncode == 0
+    for command in ("mesh", "field", "demo"):
+        assert command in result.stdout
+
+
+def test_mesh_command_reports_and_writes(tmp_path):
+    vtu, vtk, png = tmp_path / "pad.vtu", tmp_path / "pad.vtk", tmp_path / "pad.png"
+    result = run_cli("mesh", "pad5x5", "--edge-length", "1e-3", "-o", vtu, "--vtk", vtk, "--png", png, "--json")
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert report["num_tets"] == 6 * 14 * 14 * 4
+    assert report["min_dihedral_deg"] > 30 and report["worst_aspect_ratio"] < 2
+    mesh, _ = read_mesh(vtu)
+    assert mesh.num_tets == report["num_tets"]
+    assert np.sum(np.asarray(mesh.face_tags) == CORE) == report["num_core_faces"]
+    assert vtk.read_text().startswith("# vtk DataFile Version")
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
+
+
+def test_mesh_command_on_a_surface_file_in_millimetres(tmp_path):
+    path = tmp_path / "block.stl"
+    surface = box_surface((6.0, 6.0, 3.0))  # millimetres
+    surface.export(path)
+    result = run_cli("mesh", path, "--units", "mm", "--edge-length", "1e-3", "--json")
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    np.testing.assert_allclose(report["volume_m3"], 108e-9, rtol=1e-3)
+    np.testing.assert_allclose(report["core_area_m2"], 36e-6, rtol=1e-3)
+
+
+def test_field_command(tmp_path):
+    output, png = tmp_path / "field.vtu", tmp_path / "field.png"
+    result = run_cli("field", "ellipsoid8", "--modulus", "2e5", "-o", output, "--png", png, "--json")
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert report["kind"] == "laplace" and report["dtype"] == "float64"
+    assert report["residual_norm"] < 1e-9
+    assert report["min_strain"] == 0.0 and report["max_strain"] == 1.0
+    assert report["max_pressure_Pa"] == 2e5
+    _, data = read_mesh(output)
+    np.testing.assert_allclose(data["pressure_Pa"], 2e5 * data["strain"])
+    assert png.stat().st_size > 10_000
+
+    distance = json.loads(run_cli("field", output, "--kind", "distance", "--json").stdout)
+    assert distance["kind"] == "distance" and distance["residual_norm"] is None
+    np.testing.assert_allclose(distance["max_strain"], 1.0, rtol=1e-15)
+
+
+def test_demo_writes_results_and_pictures(tmp_path):
+    result = run_cli("demo", "-o", tmp_path / "out")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert sorted(summary["sensors"]) == ["ellipsoid8", "pad5x5", "sphere8"]
+    for sensor in summary["sensors"].values():
+        assert sensor["laplace_field"]["residual_norm"] < 1e-9
+        for path in sensor["files"].values():
+            assert (tmp_path / "out").as_posix() in path
+            assert Path(path).read_bytes()[:4] in (b"\x89PNG", b"<?xm", b"<VTK")
+    assert "summary.json" in result.stdout
