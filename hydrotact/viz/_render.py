@@ -45,9 +45,9 @@ def render_mesh(mesh: TetMesh, path, title: str = "") -> None:
     plotter.add_mesh(grid.clip(normal="y", origin=centre, crinkle=True), color="lightgrey", show_edges=True, edge_color="dimgrey")
     core = _faces_polydata(mesh, CORE)
     if core.n_cells:
-        plotter.add_mesh(core.clip(normal="y", origin=centre), color="orange", label="core (bonded, e = 1)")
+        plotter.add_mesh(core.clip(normal="y", origin=centre), color="orange")
         plotter.add_mesh(_faces_polydata(mesh, FREE).clip(normal="y", origin=centre).extract_feature_edges(), color="black")
-        plotter.add_legend(bcolor="white", size=(0.42, 0.07), loc="upper right", face=None)
+        title = f"{title}\ncore (bonded) faces in orange" if title else "core (bonded) faces in orange"
     plotter.add_text(title, font_size=12)
     plotter.show_bounds(xtitle="x [mm]", ytitle="y [mm]", ztitle="z [mm]", font_size=10)
     _view_from(plotter, grid.bounds, side=1.0)
@@ -67,7 +67,7 @@ def render_field(mesh: TetMesh, values, path, *, label: str, title: str = "") ->
         scalars=label,
         cmap="viridis",
         show_edges=False,
-        scalar_bar_args={"title": label, "vertical": True, "fmt": "%.3g", "position_x": 0.72, "title_font_size": 14},
+        scalar_bar_args={"title": label, "vertical": True, "fmt": "%.3g", "position_x": 0.86, "width": 0.06, "title_font_size": 14},
     )
     plotter.add_mesh(grid.extract_feature_edges(), color="black", line_width=1)
     plotter.add_text(title, font_size=12)
