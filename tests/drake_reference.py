@@ -1,15 +1,26 @@
-"""Drake's hydroelastic contact as a reference: load hydrotact's .vtk in Drake as a
-compliant mesh and query contact surfaces against a rigid geometry."""
+"""Drake's hydroelastic contact as a reference.
+
+Bodies are handed to Drake as files hydrotact wrote (a compliant tet mesh as legacy
+VTK, a rigid surface as OBJ) or as Drake's own HalfSpace, so both codes work on
+identical meshes and fields. Drake's answer is read back as polygons with their
+pressures, and integrated here (independently of hydrotact's code) into area, force
+and centroid.
+"""
 
 import numpy as np
 
 
-def drake_contact_surfaces(vtk_path, modulus, rigid_shape, X_WR, X_WS=None):
-    """Contact surfaces between the compliant mesh in `vtk_path` (frame S, placed at
-    X_WS, default identity) and a rigid Drake shape at pose X_WR (4x4 matrices).
+def _rigid_transform(X):
+    from pydrake.math import RigidTransform
 
-    Returns Drake's list of ContactSurface (polygon representation).
-    """
+    return RigidTransform(np.asarray(X, dtype=float))
+
+
+def drake_contact_surfaces(soft_vtk, modulus, other, X_WS=None, X_WO=None, other_modulus=None):
+    """Contact surfaces between a compliant mesh (`soft_vtk`, at X_WS, default
+    identity) and `other` at X_WO: a Drake shape or a path (.obj rigid, .vtk compliant
+    with `other_modulus`). Returns [(ContactSurface, whether the soft body is M)].
+    The soft body is placed at X_WS by a free body pose."""
     from pydrake.geometry import (
         AddCompliantHydroelasticProperties,
         AddRigidHydroelasticProperties,
@@ -17,7 +28,6 @@ def drake_contact_surfaces(vtk_path, modulus, rigid_shape, X_WR, X_WS=None):
         Mesh,
         ProximityProperties,
     )
-    from pydrake.math import RigidTransform
     from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
     from pydrake.multibody.tree import SpatialInertia
     from pydrake.systems.framework import DiagramBuilder
@@ -27,17 +37,53 @@ def drake_contact_surfaces(vtk_path, modulus, rigid_shape, X_WR, X_WS=None):
     body = plant.AddRigidBody("elastomer", SpatialInertia.SolidBoxWithMass(0.01, 0.01, 0.01, 0.01))
     soft = ProximityProperties()
     AddCompliantHydroelasticProperties(1.0, float(modulus), soft)
-    plant.RegisterCollisionGeometry(body, RigidTransform(), Mesh(str(vtk_path)), "elastomer", soft)
-    rigid = ProximityProperties()
-    AddRigidHydroelasticProperties(1.0, rigid)
-    plant.RegisterCollisionGeometry(plant.world_body(), RigidTransform(np.asarray(X_WR)), rigid_shape, "probe", rigid)
+    plant.RegisterCollisionGeometry(body, _rigid_transform(np.eye(4)), Mesh(str(soft_vtk)), "elastomer", soft)
+    properties = ProximityProperties()
+    if isinstance(other, str) and other.endswith(".vtk"):
+        AddCompliantHydroelasticProperties(1.0, float(other_modulus), properties)
+        other = Mesh(other)
+    elif isinstance(other, str):
+        AddRigidHydroelasticProperties(1.0, properties)
+        other = Mesh(other)
+    else:
+        AddRigidHydroelasticProperties(1.0, properties)
+    X_WO = np.eye(4) if X_WO is None else X_WO
+    plant.RegisterCollisionGeometry(plant.world_body(), _rigid_transform(X_WO), other, "other", properties)
     plant.Finalize()
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
-    plant_context = plant.GetMyContextFromRoot(context)
-    plant.SetFreeBodyPose(plant_context, body, RigidTransform(np.eye(4) if X_WS is None else np.asarray(X_WS)))
+    plant.SetFreeBodyPose(plant.GetMyContextFromRoot(context), body, _rigid_transform(np.eye(4) if X_WS is None else X_WS))
     query = scene_graph.get_query_output_port().Eval(scene_graph.GetMyContextFromRoot(context))
-    return query.ComputeContactSurfaces(HydroelasticContactRepresentation.kPolygon)
+    surfaces = query.ComputeContactSurfaces(HydroelasticContactRepresentation.kPolygon)
+    inspector = query.inspector()
+    return [(surface, inspector.GetName(surface.id_M()) == "elastomer") for surface in surfaces]
+
+
+def integrate_drake_surface(surface, soft_is_M):
+    """(area, force on the soft body, area centroid, polygon vertices, vertex pressures)
+    of a Drake ContactSurface, by fan triangulation of its polygons (numpy).
+
+    Drake's face normals point out of N into M, so the force on M is +int p n dA.
+    """
+    mesh = surface.poly_mesh_W()
+    field = surface.poly_e_MN()
+    points = np.array([mesh.vertex(i) for i in range(mesh.num_vertices())])
+    pressure = np.array([field.EvaluateAtVertex(i) for i in range(mesh.num_vertices())])
+    area = 0.0
+    force = np.zeros(3)
+    moment = np.zeros(3)
+    for f in range(mesh.num_faces()):
+        polygon = mesh.element(f)
+        ids = [polygon.vertex(k) for k in range(polygon.num_vertices())]
+        normal = np.asarray(mesh.face_normal(f))
+        for k in range(1, len(ids) - 1):
+            a, b, c = ids[0], ids[k], ids[k + 1]
+            tri_area = 0.5 * np.dot(np.cross(points[b] - points[a], points[c] - points[a]), normal)
+            area += tri_area
+            force += tri_area * (pressure[a] + pressure[b] + pressure[c]) / 3.0 * normal
+            moment += tri_area * (points[a] + points[b] + points[c]) / 3.0
+    sign = 1.0 if soft_is_M else -1.0
+    return area, sign * force, moment / area, points, pressure
 
 
 def pressing_plane_pose(height):

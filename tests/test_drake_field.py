@@ -23,9 +23,9 @@ def test_drake_pressures_equal_the_distance_field(tmp_path, name, depth):
     path = write_mesh(make_seed_mesh(name), tmp_path / f"{name}.vtk")
     mesh, _ = read_mesh(path)  # exactly what Drake reads
     top = float(np.asarray(mesh.vertices)[:, 2].max())
-    surfaces = drake_contact_surfaces(path, MODULUS, HalfSpace(), pressing_plane_pose(top - depth))
+    surfaces = drake_contact_surfaces(path, MODULUS, HalfSpace(), X_WO=pressing_plane_pose(top - depth))
     assert len(surfaces) == 1
-    surface = surfaces[0]
+    surface, _ = surfaces[0]
     polygons = surface.poly_mesh_W()
     points = np.array([polygons.vertex(i) for i in range(polygons.num_vertices())])
     drake_pressure = np.array([surface.poly_e_MN().EvaluateAtVertex(i) for i in range(polygons.num_vertices())])

@@ -2,6 +2,7 @@
 
 from ._io import MESH_SUFFIXES as MESH_SUFFIXES, read_mesh as read_mesh, to_pyvista as to_pyvista, write_mesh as write_mesh
 from ._primitives import (
+    make_ball as make_ball,
     make_box as make_box,
     make_spherical_shell as make_spherical_shell,
     make_truncated_ellipsoid_surface as make_truncated_ellipsoid_surface,

@@ -128,6 +128,23 @@ def make_spherical_shell(inner_radius: float, outer_radius: float, num_layers: i
     return make_tet_mesh(vertices, tets, make_face_tagger(core=is_core, source="shell"), source="shell")
 
 
+def make_ball(radius: float, num_layers: int) -> TetMesh:
+    """A ball |p| <= R centred at the origin, all of its skin `free`: the grid on the
+    cube [-1, 1]^3 with 2 * num_layers cells a side, mapped by p = R |x|_inf x / |x|
+    (its skin vertices lie exactly on the sphere). Give the field solve a core_depth,
+    or set a field directly (e.g. E (1 - r / R))."""
+    radius = _check_positive("radius", radius)
+    if num_layers < 1:
+        raise HydrotactError(f"num_layers must be >= 1, got {num_layers}")
+    n = 2 * int(num_layers)
+    grid_vertices, tets, _ = _kuhn_grid((n, n, n), symmetric=True)
+    x = grid_vertices / n * 2.0 - 1.0
+    length = np.linalg.norm(x, axis=1, keepdims=True)
+    scale = np.divide(np.max(np.abs(x), axis=1, keepdims=True), length, out=np.zeros_like(length), where=length > 0)
+    vertices = radius * scale * x
+    return make_tet_mesh(vertices, orient_tets(vertices, tets), source="ball")
+
+
 def make_truncated_ellipsoid_surface(
     semi_axes: tuple[float, float, float],
     center_height: float,
@@ -184,4 +201,4 @@ def make_truncated_ellipsoid_surface(
     return vertices, faces
 
 
-__all__ = ["Plane", "make_box", "make_spherical_shell", "make_truncated_ellipsoid_surface"]
+__all__ = ["Plane", "make_ball", "make_box", "make_spherical_shell", "make_truncated_ellipsoid_surface"]

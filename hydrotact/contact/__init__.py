@@ -1,0 +1,19 @@
+"""Hydroelastic contact: soft-rigid, soft-half-space and soft-soft contact surfaces,
+and the wrench they exert."""
+
+from ._api import calc_contact_surface as calc_contact_surface, compute_contact_surface as compute_contact_surface
+from ._broadphase import Capacity as Capacity
+from ._half_space import calc_half_space_surface as calc_half_space_surface
+from ._polygon import calc_polygon_integrals as calc_polygon_integrals, clip_polygon as clip_polygon
+from ._pose import Pose as Pose, calc_rotation_from_vector as calc_rotation_from_vector, make_pose as make_pose
+from ._rigid import (
+    HalfSpace as HalfSpace,
+    RigidSurface as RigidSurface,
+    make_box_probe as make_box_probe,
+    make_cylinder_probe as make_cylinder_probe,
+    make_rigid_surface as make_rigid_surface,
+    make_sphere_probe as make_sphere_probe,
+)
+from ._soft_rigid import calc_soft_rigid_surface as calc_soft_rigid_surface
+from ._soft_soft import calc_soft_soft_surface as calc_soft_soft_surface
+from ._surface import ContactSurface as ContactSurface
