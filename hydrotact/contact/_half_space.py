@@ -38,16 +38,18 @@ def slice_tet(tet_vertices, point, normal):
     return clip_polygon_by_tet_faces(square, jnp.asarray(4), tet_vertices)
 
 
-def calc_half_space_surface(field: PressureField, X_SR: Pose, capacity: Capacity = Capacity()) -> ContactSurface:
+def calc_half_space_surface(field: PressureField, X_SR: Pose, capacity: Capacity = Capacity(), brute_force: bool = False) -> ContactSurface:
     """The contact surface of a soft body and the rigid half-space z >= 0 of frame R
-    (pure, jittable, vmappable over X_SR, differentiable)."""
+    (pure, jittable, vmappable over X_SR, differentiable). `brute_force` slices every
+    tet (the reference for the culling)."""
     inward = X_SR.rotate(jnp.array([0.0, 0.0, 1.0], field.vertices.dtype))
     point = X_SR.translation.astype(field.vertices.dtype)
     push = -inward  # the force on the soft body points out of the rigid body
     tet_points = field.vertices[field.tets]
     heights = jnp.einsum("tkd,d->tk", tet_points, inward) - jnp.dot(point, inward)
     cut = (jnp.min(heights, axis=1) <= 0.0) & (jnp.max(heights, axis=1) >= 0.0)
-    tets, tets_valid, num_tets = select(cut, capacity.pairs)
+    size = tet_points.shape[0] if brute_force else capacity.pairs
+    tets, tets_valid, num_tets = select(jnp.ones_like(cut) if brute_force else cut, size)
     tet_index = jnp.maximum(tets, 0)
     offsets, gradients = calc_tet_pressure_planes(field)
 
@@ -59,7 +61,7 @@ def calc_half_space_surface(field: PressureField, X_SR: Pose, capacity: Capacity
     vertices, pressures, counts, areas, integrals, first_moments, pressure_moments = jax.vmap(polygon)(
         tet_points[tet_index], offsets[tet_index], gradients[tet_index]
     )
-    normals = jnp.broadcast_to(push, (capacity.pairs, 3))
+    normals = jnp.broadcast_to(push[None], (size, 3))
     keep = jax.vmap(is_normal_along_gradient, in_axes=(None, 0))(push, gradients[tet_index])
     valid = tets_valid & (counts >= 3) & (areas > 0.0) & keep
     return ContactSurface(
@@ -73,7 +75,7 @@ def calc_half_space_surface(field: PressureField, X_SR: Pose, capacity: Capacity
         first_moments_S=first_moments,
         pressure_moments_S=pressure_moments,
         tet_index=jnp.where(tets_valid, tet_index, -1),
-        other_index=jnp.full(capacity.pairs, -1),
-        overflow=num_tets > capacity.pairs,
+        other_index=jnp.full(size, -1),
+        overflow=num_tets > size,
         num_candidates=num_tets,
     )

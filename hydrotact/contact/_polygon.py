@@ -18,7 +18,8 @@ def clip_polygon(vertices, count, normal, offset):
 
     Each vertex i emits itself if inside, then the crossing point of edge (i, i+1)
     if that edge crosses the plane. Output capacity equals input capacity; the caller
-    sizes the buffer so that it cannot overflow (one clip adds at most one vertex).
+    sizes the buffer so that it cannot overflow (one clip adds at most one vertex, and
+    callers start from at most capacity - 4 vertices before four clips).
 
     **Returns:** (vertices (capacity, 3), count).
     """
@@ -35,15 +36,16 @@ def clip_polygon(vertices, count, normal, offset):
     t = safe_div(distance, distance - next_distance)
     crossing = vertices + t[:, None] * (following - vertices)
     keep = active & inside
-    # Output slots: vertex i's own point (if kept), then its crossing (if any).
+    # Vertex i emits its own point (if kept), then its crossing (if any). Output slot
+    # s is filled by the vertex whose emitted range covers s: a gather, not a scatter.
     emitted = keep.astype(jnp.int32) + crosses.astype(jnp.int32)
-    start = jnp.cumsum(emitted) - emitted
-    own_slot = jnp.where(keep, start, capacity)
-    cross_slot = jnp.where(crosses, start + keep.astype(jnp.int32), capacity)
-    out = jnp.zeros_like(vertices)
-    out = out.at[own_slot].set(vertices, mode="drop")
-    out = out.at[cross_slot].set(crossing, mode="drop")
-    new_count = jnp.minimum(jnp.sum(emitted), capacity)
+    ends = jnp.cumsum(emitted)
+    new_count = jnp.minimum(ends[-1], capacity)
+    source = jnp.minimum(jnp.searchsorted(ends, index, side="right"), capacity - 1)
+    first_of_source = (ends[source] - emitted[source]) == index
+    own = keep[source] & first_of_source
+    out = jnp.where(own[:, None], vertices[source], crossing[source])
+    out = jnp.where((index < new_count)[:, None], out, 0.0)
     return out, new_count
 
 

@@ -45,11 +45,15 @@ def _polygon_from_pair(tet_vertices, triangle, normal, offset, gradient):
     return vertices, pressures, count, area, integral, first_moment, pressure_moment
 
 
-def calc_soft_rigid_surface(field: PressureField, rigid: RigidSurface, X_SR: Pose, capacity: Capacity = Capacity()) -> ContactSurface:
+def calc_soft_rigid_surface(
+    field: PressureField, rigid: RigidSurface, X_SR: Pose, capacity: Capacity = Capacity(), brute_force: bool = False
+) -> ContactSurface:
     """The contact surface of a soft body and a rigid surface at pose X_SR (pure,
     jittable, vmappable over X_SR, differentiable in X_SR, E and the field).
 
     Normals point out of the rigid body, the direction of the force on the soft body.
+    `brute_force` clips every tet against every triangle (the reference for the broad
+    phase; its buffers hold num_tets x num_faces polygons and never overflow).
     """
     vertices_S = X_SR.apply(jnp.asarray(rigid.vertices_R, field.vertices.dtype))
     triangles = vertices_S[rigid.faces]
@@ -64,13 +68,23 @@ def calc_soft_rigid_surface(field: PressureField, rigid: RigidSurface, X_SR: Pos
     rigid_lo, rigid_hi = jnp.min(tri_lo, axis=0), jnp.max(tri_hi, axis=0)
     region_lo, region_hi = jnp.maximum(soft_lo, rigid_lo), jnp.minimum(soft_hi, rigid_hi)
 
-    tets, tets_valid, num_tets = select(boxes_overlap(tet_lo, tet_hi, region_lo[None], region_hi[None]), capacity.tets)
-    tris, tris_valid, num_tris = select(boxes_overlap(tri_lo, tri_hi, region_lo[None], region_hi[None]), capacity.others)
-    safe_tets, safe_tris = jnp.maximum(tets, 0), jnp.maximum(tris, 0)
-    i, j, pair_valid, num_pairs = select_pairs(
-        tet_lo[safe_tets], tet_hi[safe_tets], tets_valid, tri_lo[safe_tris], tri_hi[safe_tris], tris_valid, capacity.pairs
-    )
-    tet_index, tri_index = safe_tets[i], safe_tris[j]
+    if brute_force:
+        num_tets, num_tris = tet_points.shape[0], triangles.shape[0]
+        tet_index = jnp.repeat(jnp.arange(num_tets), num_tris)
+        tri_index = jnp.tile(jnp.arange(num_tris), num_tets)
+        pair_valid = jnp.ones(tet_index.shape, dtype=bool)
+        num_pairs = jnp.asarray(tet_index.shape[0])
+        overflow = jnp.asarray(False)
+    else:
+        tets, tets_valid, num_tets = select(boxes_overlap(tet_lo, tet_hi, region_lo[None], region_hi[None]), capacity.tets)
+        tris, tris_valid, num_tris = select(boxes_overlap(tri_lo, tri_hi, region_lo[None], region_hi[None]), capacity.others)
+        safe_tets, safe_tris = jnp.maximum(tets, 0), jnp.maximum(tris, 0)
+        i, j, pair_valid, num_pairs = select_pairs(
+            tet_lo[safe_tets], tet_hi[safe_tets], tets_valid, tri_lo[safe_tris], tri_hi[safe_tris], tris_valid, capacity.pairs
+        )
+        tet_index, tri_index = safe_tets[i], safe_tris[j]
+        overflow = (num_tets > capacity.tets) | (num_tris > capacity.others) | (num_pairs > capacity.pairs)
+        num_pairs = jnp.max(jnp.array([num_tets, num_tris, num_pairs]))
 
     offsets, gradients = calc_tet_pressure_planes(field)
     normals = triangle_normals[tri_index]
@@ -79,7 +93,6 @@ def calc_soft_rigid_surface(field: PressureField, rigid: RigidSurface, X_SR: Pos
     )
     vertices, pressures, counts, areas, integrals, first_moments, pressure_moments = polygon
     valid = pair_valid & (counts >= 3) & (areas > 0.0) & jax.vmap(is_normal_along_gradient)(normals, gradients[tet_index])
-    overflow = (num_tets > capacity.tets) | (num_tris > capacity.others) | (num_pairs > capacity.pairs)
     return ContactSurface(
         vertices_S=vertices,
         pressures=pressures,
@@ -93,5 +106,5 @@ def calc_soft_rigid_surface(field: PressureField, rigid: RigidSurface, X_SR: Pos
         tet_index=jnp.where(pair_valid, tet_index, -1),
         other_index=jnp.where(pair_valid, tri_index, -1),
         overflow=overflow,
-        num_candidates=jnp.max(jnp.array([num_tets, num_tris, num_pairs])),
+        num_candidates=num_pairs,
     )

@@ -34,9 +34,12 @@ def _pair_polygon(tet_a, tet_b, offset_a, gradient_a, offset_b, gradient_b):
     return (vertices, pressures, count, push, keep & ~degenerate, *calc_polygon_integrals(vertices, count, pressures, push))
 
 
-def calc_soft_soft_surface(field_A: PressureField, field_B: PressureField, X_SB: Pose, capacity: Capacity = Capacity()) -> ContactSurface:
+def calc_soft_soft_surface(
+    field_A: PressureField, field_B: PressureField, X_SB: Pose, capacity: Capacity = Capacity(), brute_force: bool = False
+) -> ContactSurface:
     """The contact surface of soft body A (frame S) and soft body B at pose X_SB
-    (pure, jittable, vmappable over X_SB, differentiable)."""
+    (pure, jittable, vmappable over X_SB, differentiable). `brute_force` tries every
+    pair of tets (the reference for the broad phase)."""
     points_A = field_A.vertices[field_A.tets]
     points_B = X_SB.apply(field_B.vertices.astype(field_A.vertices.dtype))[field_B.tets]
     offsets_A, gradients_A = calc_tet_pressure_planes(field_A)
@@ -49,11 +52,19 @@ def calc_soft_soft_surface(field_A: PressureField, field_B: PressureField, X_SB:
     lo_B, hi_B = calc_boxes(points_B)
     region_lo = jnp.maximum(jnp.min(lo_A, axis=0), jnp.min(lo_B, axis=0))
     region_hi = jnp.minimum(jnp.max(hi_A, axis=0), jnp.max(hi_B, axis=0))
-    tets_A, valid_A, num_A = select(boxes_overlap(lo_A, hi_A, region_lo[None], region_hi[None]), capacity.tets)
-    tets_B, valid_B, num_B = select(boxes_overlap(lo_B, hi_B, region_lo[None], region_hi[None]), capacity.others)
-    safe_A, safe_B = jnp.maximum(tets_A, 0), jnp.maximum(tets_B, 0)
-    i, j, pair_valid, num_pairs = select_pairs(lo_A[safe_A], hi_A[safe_A], valid_A, lo_B[safe_B], hi_B[safe_B], valid_B, capacity.pairs)
-    a, b = safe_A[i], safe_B[j]
+    if brute_force:
+        a = jnp.repeat(jnp.arange(points_A.shape[0]), points_B.shape[0])
+        b = jnp.tile(jnp.arange(points_B.shape[0]), points_A.shape[0])
+        pair_valid = jnp.ones(a.shape, dtype=bool)
+        overflow, num_candidates = jnp.asarray(False), jnp.asarray(a.shape[0])
+    else:
+        tets_A, valid_A, num_A = select(boxes_overlap(lo_A, hi_A, region_lo[None], region_hi[None]), capacity.tets)
+        tets_B, valid_B, num_B = select(boxes_overlap(lo_B, hi_B, region_lo[None], region_hi[None]), capacity.others)
+        safe_A, safe_B = jnp.maximum(tets_A, 0), jnp.maximum(tets_B, 0)
+        i, j, pair_valid, num_pairs = select_pairs(lo_A[safe_A], hi_A[safe_A], valid_A, lo_B[safe_B], hi_B[safe_B], valid_B, capacity.pairs)
+        a, b = safe_A[i], safe_B[j]
+        overflow = (num_A > capacity.tets) | (num_B > capacity.others) | (num_pairs > capacity.pairs)
+        num_candidates = jnp.max(jnp.array([num_A, num_B, num_pairs]))
     vertices, pressures, counts, normals, keep, areas, integrals, first_moments, pressure_moments = jax.vmap(_pair_polygon)(
         points_A[a], points_B[b], offsets_A[a], gradients_A[a], offsets_B[b], gradients_B[b]
     )
@@ -70,6 +81,6 @@ def calc_soft_soft_surface(field_A: PressureField, field_B: PressureField, X_SB:
         pressure_moments_S=pressure_moments,
         tet_index=jnp.where(pair_valid, a, -1),
         other_index=jnp.where(pair_valid, b, -1),
-        overflow=(num_A > capacity.tets) | (num_B > capacity.others) | (num_pairs > capacity.pairs),
-        num_candidates=jnp.max(jnp.array([num_A, num_B, num_pairs])),
+        overflow=overflow,
+        num_candidates=num_candidates,
     )

@@ -1,0 +1,297 @@
+"""Contact surfaces: closed forms, broad phase vs brute force, gradients, edge cases."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import central_difference
+
+from hydrotact import HydrotactError
+from hydrotact.contact import (
+    Capacity,
+    HalfSpace,
+    calc_contact_surface,
+    calc_half_space_surface,
+    calc_soft_rigid_surface,
+    calc_soft_soft_surface,
+    clip_polygon,
+    compute_contact_surface,
+    make_box_probe,
+    make_cylinder_probe,
+    make_pose,
+    make_sphere_probe,
+)
+from hydrotact.field import calc_distance_field, make_laplace_problem, make_pressure_field, solve_strain
+from hydrotact.mesh import FREE, make_ball, make_box, make_seed_mesh
+
+E = 1e5
+
+
+def _ball_field(radius, num_layers, modulus=E):
+    """A soft ball with the field p = E (1 - r / R) set at its vertices."""
+    mesh = make_ball(radius, num_layers)
+    r = np.linalg.norm(np.asarray(mesh.vertices), axis=1)
+    strain = np.where(mesh.vertices_tagged(FREE), 0.0, 1.0 - r / radius)  # exactly 0 on the skin
+    return mesh, make_pressure_field(mesh, jnp.asarray(strain), modulus)
+
+
+def _sphere_plane_force(radius, depth, modulus=E):
+    """int over the disk cut at height h = R - d of E (1 - sqrt(rho^2 + h^2) / R)."""
+    h = radius - depth
+    a2 = radius**2 - h**2
+    return modulus * (np.pi * a2 - 2 * np.pi / (3 * radius) * (radius**3 - h**3))
+
+
+def test_soft_sphere_pressed_by_a_plane_matches_the_closed_form():
+    radius, depth = 5e-3, 1.5e-3
+    exact = _sphere_plane_force(radius, depth)
+    errors = []
+    for num_layers in (3, 6, 12):
+        _, field = _ball_field(radius, num_layers)
+        surface, _ = compute_contact_surface(field, HalfSpace(), make_pose([0.0, 0.0, radius - depth]))
+        force = np.asarray(surface.calc_force())
+        np.testing.assert_allclose(force[:2], 0.0, atol=1e-9 * exact)
+        errors.append(abs(-force[2] - exact) / exact)
+    assert errors[-1] < 0.01, errors
+    assert errors[0] > errors[1] > errors[2], errors
+    # The P1 interpolant of a smooth field and faceted skin: second order.
+    assert np.log2(errors[0] / errors[1]) > 1.5 and np.log2(errors[1] / errors[2]) > 1.5, errors
+
+
+def test_uniform_pressure_force_is_pressure_times_projected_area():
+    """A slab with the Laplace field between z = 0 (e = 1) and z = h (e = 0) and
+    insulated sides has p = E (1 - z / h): a plane at height z0 feels exactly
+    E (1 - z0 / h) over the full footprint; a tilted plane too, projected."""
+    size, height = 4e-3, 2e-3
+    mesh = make_box((size, size, height), 0.5e-3, sides="insulated")
+    strain = solve_strain(make_laplace_problem(mesh), rtol=1e-14).strain
+    field = make_pressure_field(mesh, strain, E)
+    z0 = 1.3e-3
+    surface, _ = compute_contact_surface(field, HalfSpace(), make_pose([0.0, 0.0, z0]))
+    np.testing.assert_allclose(float(surface.total_area), size * size, rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(surface.calc_force()), [0, 0, -E * (1 - z0 / height) * size * size], rtol=1e-10, atol=1e-12)
+    # A box probe larger than the pad, tilted about x: the pressure is linear in z,
+    # so the force is the mean pressure (at the centre) times the footprint, along the plane normal.
+    angle = 0.1
+    probe = make_box_probe((10e-3, 10e-3, 3e-3))
+    X_SR = make_pose([0.0, 0.0, z0], [angle, 0.0, 0.0])
+    tilted, _ = compute_contact_surface(field, probe, X_SR)
+    normal = -np.asarray(X_SR.rotation)[:, 2]
+    expected = E * (1 - z0 / height) * size * size / np.cos(angle) * normal
+    np.testing.assert_allclose(np.asarray(tilted.calc_force()), expected * np.cos(angle) / np.cos(angle), rtol=1e-9, atol=1e-9 * np.linalg.norm(expected))
+    np.testing.assert_allclose(float(tilted.total_area), size * size / np.cos(angle), rtol=1e-9)
+
+
+def _surface_key(surface):
+    valid = np.asarray(surface.valid)
+    order = np.lexsort((np.asarray(surface.other_index)[valid], np.asarray(surface.tet_index)[valid]))
+    return (
+        np.asarray(surface.tet_index)[valid][order],
+        np.asarray(surface.other_index)[valid][order],
+        np.asarray(surface.areas)[valid][order],
+        np.asarray(surface.pressure_integrals)[valid][order],
+    )
+
+
+def _assert_same_surface(culled, brute):
+    """The same polygons (same tet and triangle pairs) with the same values; XLA may
+    fuse the two programs differently, so values agree to round-off."""
+    assert not bool(culled.overflow)
+    tets, others, areas, integrals = _surface_key(culled)
+    ref_tets, ref_others, ref_areas, ref_integrals = _surface_key(brute)
+    np.testing.assert_array_equal(tets, ref_tets)
+    np.testing.assert_array_equal(others, ref_others)
+    np.testing.assert_allclose(areas, ref_areas, rtol=1e-12)
+    np.testing.assert_allclose(integrals, ref_integrals, rtol=1e-12)
+
+
+def test_broad_phase_matches_brute_force_soft_rigid():
+    field = make_pressure_field(mesh := make_seed_mesh("pad5x5", 1.1e-3), calc_distance_field(mesh), E)
+    probe = make_cylinder_probe(2e-3, length=3e-3, num_sides=12)
+    for xyz in ([0.3e-3, -0.2e-3, 3.6e-3], [6.3e-3, 0.0, 3.5e-3], [0.0, 0.0, 5e-3]):
+        X = make_pose(xyz, [0.05, 0.1, 0.2])
+        culled = calc_soft_rigid_surface(field, probe, X, Capacity(1024, 256, 4096))
+        brute = calc_soft_rigid_surface(field, probe, X, brute_force=True)
+        _assert_same_surface(culled, brute)
+
+
+def test_broad_phase_matches_brute_force_half_space_and_soft_soft():
+    mesh, field = _ball_field(5e-3, 2)
+    X = make_pose([0.2e-3, 0.0, 3.9e-3], [0.2, 0.0, 0.0])
+    _assert_same_surface(calc_half_space_surface(field, X), calc_half_space_surface(field, X, brute_force=True))
+    X_SB = make_pose([1e-3, 0.5e-3, 9e-3], [0.3, 0.1, 0.0])
+    culled = calc_soft_soft_surface(field, field, X_SB, Capacity(512, 512, 4096))
+    brute = calc_soft_soft_surface(field, field, X_SB, brute_force=True)
+    _assert_same_surface(culled, brute)
+    assert int(culled.num_polygons) > 10
+
+
+def test_overflow_is_detected_and_retried():
+    field = make_pressure_field(mesh := make_seed_mesh("pad5x5", 1.1e-3), calc_distance_field(mesh), E)
+    probe = make_cylinder_probe(2e-3, num_sides=16)
+    X = make_pose([0.0, 0.0, 3.5e-3])
+    small = calc_soft_rigid_surface(field, probe, X, Capacity(64, 64, 128))
+    assert bool(small.overflow) and int(small.num_candidates) > 128
+    surface, capacity = compute_contact_surface(field, probe, X, Capacity(64, 64, 128))
+    assert not bool(surface.overflow) and capacity.pairs > 128
+    reference, _ = compute_contact_surface(field, probe, X)
+    np.testing.assert_allclose(np.asarray(surface.calc_force()), np.asarray(reference.calc_force()), rtol=1e-12, atol=1e-15)
+
+
+def test_overflow_beyond_the_limit_is_a_clear_error(monkeypatch):
+    from hydrotact.contact import _api
+
+    monkeypatch.setattr(_api, "MAX_PAIRS", 64)
+    field = make_pressure_field(mesh := make_seed_mesh("pad5x5"), calc_distance_field(mesh), E)
+    with pytest.raises(HydrotactError, match="needs more than 64 candidate pairs"):
+        compute_contact_surface(field, make_cylinder_probe(2e-3), make_pose([0.0, 0.0, 3.5e-3]), Capacity(16, 16, 32))
+
+
+def test_batched_trajectory_matches_single_poses():
+    field = make_pressure_field(mesh := make_seed_mesh("pad5x5"), calc_distance_field(mesh), E)
+    probe = make_cylinder_probe(2e-3)
+    xs = np.linspace(-4.4e-3, 4.4e-3, 9)
+    poses = jax.vmap(lambda x: make_pose(jnp.array([x, 0.0, 3.6e-3])))(jnp.asarray(xs))
+    batch, capacity = compute_contact_surface(field, probe, poses)
+    assert batch.calc_force().shape == (9, 3)
+    for k in (0, 4, 8):
+        single, _ = compute_contact_surface(field, probe, make_pose([xs[k], 0.0, 3.6e-3]), capacity)
+        np.testing.assert_allclose(np.asarray(batch.calc_force()[k]), np.asarray(single.calc_force()), rtol=1e-12, atol=1e-15)
+
+
+def test_clip_polygon_cases():
+    square = jnp.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]] + [[0, 0, 0]] * 4, dtype=float)
+    # Cut off the corner x + y > 1.5: a pentagon with area 1 - 0.125.
+    out, count = clip_polygon(square, 4, jnp.array([1.0, 1.0, 0.0]), 1.5)
+    assert int(count) == 5
+    from hydrotact.contact import calc_polygon_integrals
+
+    area, *_ = calc_polygon_integrals(out, count, jnp.zeros(8), jnp.array([0.0, 0.0, 1.0]))
+    np.testing.assert_allclose(float(area), 0.875, rtol=1e-14)
+    # Entirely outside, entirely inside, and touching along an edge.
+    assert int(clip_polygon(square, 4, jnp.array([1.0, 0.0, 0.0]), -1.0)[1]) == 0
+    assert int(clip_polygon(square, 4, jnp.array([1.0, 0.0, 0.0]), 2.0)[1]) == 4
+    edge, count = clip_polygon(square, 4, jnp.array([1.0, 0.0, 0.0]), 0.0)
+    area, *_ = calc_polygon_integrals(edge, count, jnp.zeros(8), jnp.array([0.0, 0.0, 1.0]))
+    assert float(area) == 0.0
+
+
+def test_polygon_integrals_of_a_linear_pressure():
+    from hydrotact.contact import calc_polygon_integrals
+
+    # Unit right triangle in z = 0 with p = 1 + 2x + 3y: int p = 1/2 + 2/6 + 3/6 = 4/3.
+    vertices = jnp.zeros((8, 3)).at[:3].set(jnp.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=float))
+    pressures = 1 + 2 * vertices[:, 0] + 3 * vertices[:, 1]
+    area, integral, first, moment = calc_polygon_integrals(vertices, 3, pressures, jnp.array([0.0, 0.0, 1.0]))
+    np.testing.assert_allclose([float(area), float(integral)], [0.5, 1 / 2 + 1 / 3 + 1 / 2], rtol=1e-14)
+    np.testing.assert_allclose(np.asarray(first), [1 / 6, 1 / 6, 0], rtol=1e-14)
+    # int x p = int x + 2 x^2 + 3 x y = 1/6 + 2/12 + 3/24.
+    np.testing.assert_allclose(float(moment[0]), 1 / 6 + 1 / 6 + 1 / 8, rtol=1e-14)
+
+
+def _pad_setup():
+    mesh = make_seed_mesh("pad5x5", 0.8e-3)
+    return mesh, calc_distance_field(mesh)
+
+
+def test_gradients_wrt_pose_modulus_and_field_soft_rigid(rng):
+    mesh, strain = _pad_setup()
+    probe = make_sphere_probe(1.5e-3, subdivisions=2)
+    capacity = Capacity(2048, 512, 8192)
+
+    def summary(translation, rotation_vector, modulus, strain):
+        field = make_pressure_field(mesh, strain, modulus)
+        surface = calc_soft_rigid_surface(field, probe, make_pose(translation, rotation_vector), capacity)
+        force, torque = surface.calc_wrench(jnp.array([0.0, 0.0, 4e-3]))
+        pressures = jnp.where(surface.valid[:, None] & (jnp.arange(8)[None] < surface.counts[:, None]), surface.pressures, 0.0)
+        return jnp.concatenate([force, 1e3 * torque, jnp.array([jnp.sum(pressures) * 1e-8, surface.total_area * 1e6])])
+
+    t0 = jnp.array([0.31e-3, -0.17e-3, 4e-3 - 0.6e-3])
+    w0 = jnp.array([0.2, -0.1, 0.3])
+    args = (t0, w0, jnp.asarray(E), jnp.asarray(strain))
+    assert not bool(calc_soft_rigid_surface(make_pressure_field(mesh, strain, E), probe, make_pose(t0, w0), capacity).overflow)
+    _check_jacobians(summary, args, steps=(1e-8, 1e-5, 1.0, 1e-5), rng=rng, skin=mesh.vertices_tagged(FREE))
+
+
+def test_gradients_half_space_and_soft_soft(rng):
+    mesh, field = _ball_field(5e-3, 3)
+    strain = field.strain
+
+    def half_space(translation, rotation_vector, modulus, strain):
+        surface = calc_half_space_surface(make_pressure_field(mesh, strain, modulus), make_pose(translation, rotation_vector))
+        force, torque = surface.calc_wrench()
+        return jnp.concatenate([force, 1e3 * torque, jnp.array([surface.total_area * 1e6])])
+
+    _check_jacobians(half_space, (jnp.array([0.1e-3, 0.2e-3, 3.7e-3]), jnp.array([0.1, 0.05, 0.0]), jnp.asarray(E), strain), (1e-8, 1e-5, 1.0, 1e-5), rng, mesh.vertices_tagged(FREE))
+
+    capacity = Capacity(1024, 1024, 4096)
+
+    def soft_soft(translation, rotation_vector, modulus, strain):
+        field_a = make_pressure_field(mesh, strain, modulus)
+        surface = calc_soft_soft_surface(field_a, field, make_pose(translation, rotation_vector), capacity)
+        force, torque = surface.calc_wrench()
+        return jnp.concatenate([force, 1e3 * torque, jnp.array([surface.total_area * 1e6])])
+
+    t0, w0 = jnp.array([0.7e-3, 0.3e-3, 9.1e-3]), jnp.array([0.2, -0.1, 0.05])
+    assert not bool(calc_soft_soft_surface(field, field, make_pose(t0, w0), capacity).overflow)
+    _check_jacobians(soft_soft, (t0, w0, jnp.asarray(E), strain), (1e-8, 1e-5, 1.0, 1e-5), rng, mesh.vertices_tagged(FREE))
+
+
+def _check_jacobians(fn, args, steps, rng, skin=None):
+    """Reverse-mode directional derivatives against central differences, per argument.
+
+    Field values (argument 3) are perturbed only inside the body: on the skin the
+    pressure is zero by definition, and where two skins meet (the rim of a soft-soft
+    contact) both zero-pressure planes pass through the polygon corners, a genuine kink.
+    """
+    for k, (arg, step) in enumerate(zip(args, steps)):
+        direction = jnp.asarray(rng.normal(size=np.shape(arg)))
+        if np.ndim(arg) == 0:
+            direction = jnp.asarray(1.0)
+        if k == 3 and skin is not None:
+            direction = jnp.where(jnp.asarray(skin), 0.0, direction)
+
+        def along(t, k=k, direction=direction):
+            moved = list(args)
+            moved[k] = args[k] + t * direction
+            return fn(*moved)
+
+        out = np.asarray(fn(*args))
+        jacobian = jax.jacrev(lambda t: along(t))(0.0)
+        fd = (np.asarray(along(step)) - np.asarray(along(-step))) / (2 * step)
+        scale = np.max(np.abs(fd)) + 1e-300
+        assert np.all(np.isfinite(np.asarray(jacobian)))
+        np.testing.assert_allclose(np.asarray(jacobian), fd, rtol=2e-4, atol=2e-4 * scale, err_msg=f"argument {k}; value {out}")
+
+
+def test_edge_cases_give_finite_values_and_gradients():
+    mesh = make_box((4e-3, 4e-3, 2e-3), 0.5e-3)
+    field = make_pressure_field(mesh, calc_distance_field(mesh), E)
+    probe = make_box_probe((2e-3, 2e-3, 1e-3))
+
+    def force(z, rotation=(0.0, 0.0, 0.0)):
+        return jnp.sum(calc_soft_rigid_surface(field, probe, make_pose(jnp.array([0.25e-3, 0.25e-3, z]), jnp.asarray(rotation))).calc_force())
+
+    def half_force(z):
+        return jnp.sum(calc_half_space_surface(field, make_pose(jnp.array([0.0, 0.0, z]))).calc_force())
+
+    cases = {
+        "empty (above the pad)": 3e-3,
+        "grazing (touching the skin)": 2e-3,
+        "coplanar with a layer of tet faces": 1.5e-3,
+    }
+    for label, z in cases.items():
+        for fn in (force, half_force):
+            value, gradient = jax.value_and_grad(fn)(z)
+            assert np.isfinite(float(value)) and np.isfinite(float(gradient)), (label, value, gradient)
+    assert float(force(3e-3)) == 0.0 and float(half_force(3e-3)) == 0.0
+    assert abs(float(force(2e-3))) < 1e-12  # on the skin the pressure is 0 (up to rounding)
+    # Zero rotation vector and an edge-on probe face stay finite too.
+    value, gradient = jax.value_and_grad(lambda w: force(1.8e-3, w))(jnp.zeros(3))
+    assert np.isfinite(float(value)) and np.all(np.isfinite(np.asarray(gradient)))
+
+
+def test_calc_contact_surface_dispatch_and_bad_other():
+    mesh, field = _ball_field(5e-3, 2)
+    with pytest.raises(HydrotactError, match="cannot compute contact with a str"):
+        calc_contact_surface(field, "plane", make_pose())
