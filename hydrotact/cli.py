@@ -49,6 +49,17 @@ def _parser() -> argparse.ArgumentParser:
     field.add_argument("-o", "--output", type=Path, metavar="FIELD.vtu", help="write the mesh with strain and pressure")
     field.add_argument("--png", type=Path, metavar="FIELD.png", help="render the pressure field")
 
+    contact = commands.add_parser("contact", help="press a probe into a sensor; report the contact surface and wrench")
+    which = contact.add_mutually_exclusive_group(required=True)
+    which.add_argument("--sensor", choices=["pad5x5", "sphere8", "ellipsoid8"], help="a built-in sensor")
+    which.add_argument("--mesh", metavar="FILE", help="a tet mesh (.vtu/.vtk) or closed surface file")
+    contact.add_argument("--field", default="laplace", choices=["laplace", "distance"], help="the sensor's strain field")
+    contact.add_argument("--modulus", type=_length, default=1e5, metavar="E", help="hydroelastic modulus in Pa (default 1e5)")
+    contact.add_argument("--probe", required=True, metavar="SPEC", help="cylinder:d=2mm[,length=10mm], sphere:r=3mm or plane")
+    contact.add_argument("--at", required=True, metavar="X,Y,DEPTH", help="tip position over the sensor and depth below its skin (e.g. 0,2.2mm,0.4mm; bare numbers are metres)")
+    contact.add_argument("--json", action="store_true", help="print the report as JSON")
+    contact.add_argument("--png", type=Path, metavar="CONTACT.png", help="render the contact surface over the sensor")
+
     demo = commands.add_parser("demo", help="the built-in demonstration: writes results and pictures to out/")
     demo.add_argument("-o", "--output", type=Path, default=Path("out"), metavar="DIR")
     return parser
@@ -88,6 +99,20 @@ def _run(args) -> None:
         return
 
     from .mesh import calc_mesh_quality, write_mesh
+
+    if args.command == "contact":
+        from ._contact_job import run_contact
+
+        source = args.sensor or args.mesh
+        mesh = load_tet_mesh(source)
+        strain, _ = solve_field(mesh, kind=args.field, modulus=args.modulus, source=source)
+        report, surface, probe, X_SP = run_contact(mesh, strain, args.modulus, args.probe, args.at)
+        if args.png:
+            from .viz import render_contact
+
+            render_contact(mesh, surface, args.png, probe=probe, X_SP=X_SP, title=f"{source}: {args.probe} at {args.at}")
+        _print_report(f"contact of {args.probe} with {source}", report, args.json)
+        return
 
     mesh = load_tet_mesh(args.source, edge_length=args.edge_length, units=args.units, core_plane_z=args.core_plane)
     if args.command == "mesh":

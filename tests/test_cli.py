@@ -4,7 +4,7 @@ import json
 from pathlib import Path
 
 import numpy as np
-from helpers import box_surface, run_cli
+from helpers import assert_one_line_error, box_surface, run_cli
 
 from hydrotact.mesh import CORE, read_mesh
 
@@ -70,3 +70,29 @@ def test_demo_writes_results_and_pictures(tmp_path):
             assert (tmp_path / "out").as_posix() in path
             assert Path(path).read_bytes()[:4] in (b"\x89PNG", b"<?xm", b"<VTK")
     assert "summary.json" in result.stdout
+
+
+def test_contact_command(tmp_path):
+    png = tmp_path / "contact.png"
+    result = run_cli("contact", "--sensor", "pad5x5", "--field", "distance", "--probe", "cylinder:d=2mm", "--at", "0,2.2mm,0.4mm", "--json", "--png", png)
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    np.testing.assert_allclose(report["tip_position_m"], [0.0, 2.2e-3, 3.6e-3], atol=1e-15)
+    # The tip face (a 48-gon inscribed in the 1 mm circle) and the walls 0.4 mm deep.
+    tip_area = 0.5 * 48 * (1e-3) ** 2 * np.sin(2 * np.pi / 48)
+    wall_area = 48 * 2 * 1e-3 * np.sin(np.pi / 48) * 0.4e-3
+    np.testing.assert_allclose(report["area_m2"], tip_area + wall_area, rtol=1e-9)
+    assert report["force_N"][2] < 0 and abs(report["force_N"][0]) < 1e-3 * abs(report["force_N"][2])
+    np.testing.assert_allclose(report["centroid_m"][:2], [0.0, 2.2e-3], atol=1e-9)
+    assert 0 < report["max_pressure_Pa"] <= 1e5
+    assert png.stat().st_size > 10_000
+
+    plane = json.loads(run_cli("contact", "--sensor", "sphere8", "--probe", "plane", "--at", "0,0,1mm", "--json").stdout)
+    assert plane["num_polygons"] > 100 and plane["force_N"][2] < 0
+
+
+def test_contact_command_errors():
+    assert_one_line_error(run_cli("contact", "--sensor", "pad5x5", "--probe", "cone:h=1", "--at", "0,0,1mm"), "--probe", "unknown probe")
+    assert_one_line_error(run_cli("contact", "--sensor", "pad5x5", "--probe", "plane", "--at", "0,0"), "--at", "X,Y,DEPTH")
+    assert_one_line_error(run_cli("contact", "--sensor", "pad5x5", "--probe", "plane", "--at", "20mm,0,1mm"), "no part of the sensor lies under")
+    assert_one_line_error(run_cli("contact", "--sensor", "pad5x5", "--probe", "cylinder:d=-2mm", "--at", "0,0,1mm"), "diameter must be a positive length")

@@ -74,3 +74,45 @@ def render_field(mesh: TetMesh, values, path, *, label: str, title: str = "") ->
     plotter.show_bounds(xtitle="x [mm]", ytitle="y [mm]", ztitle="z [mm]", font_size=10)
     _view_from(plotter, grid.bounds, side=1.0)  # the kept half is y < centre: face its cut
     _save(plotter, path)
+
+
+def _surface_polydata(surface) -> pv.PolyData:
+    """The valid contact polygons, fan-triangulated, with pressure at the points (mm)."""
+    valid = np.asarray(surface.valid)
+    vertices = np.asarray(surface.vertices_S)[valid] * 1e3
+    pressures = np.asarray(surface.pressures)[valid]
+    counts = np.asarray(surface.counts)[valid]
+    points, values, faces = [], [], []
+    offset = 0
+    for polygon, pressure, count in zip(vertices, pressures, counts):
+        points.append(polygon[:count])
+        values.append(pressure[:count])
+        for k in range(1, count - 1):
+            faces.append([3, offset, offset + k, offset + k + 1])
+        offset += count
+    if not faces:
+        return pv.PolyData()
+    data = pv.PolyData(np.concatenate(points), np.asarray(faces).reshape(-1))
+    data.point_data["pressure [Pa]"] = np.concatenate(values)
+    return data
+
+
+def render_contact(mesh: TetMesh, surface, path, *, probe=None, X_SP=None, title: str = "") -> None:
+    """A PNG of a contact surface coloured by pressure over the translucent sensor,
+    with the probe's outline; lengths in mm."""
+    plotter = pv.Plotter(off_screen=True, window_size=_WINDOW)
+    skin = _faces_polydata(mesh, FREE)
+    plotter.add_mesh(skin, color="lightgrey", opacity=0.25)
+    contact = _surface_polydata(surface)
+    if contact.n_cells:
+        plotter.add_mesh(contact, scalars="pressure [Pa]", cmap="inferno", scalar_bar_args={"title": "pressure [Pa]", "vertical": True, "fmt": "%.3g", "position_x": 0.86, "width": 0.06})
+    else:
+        title = f"{title}\n(no contact)"
+    if probe is not None and X_SP is not None and hasattr(probe, "faces"):
+        vertices = np.asarray(X_SP.apply(np.asarray(probe.vertices_R))) * 1e3
+        faces = np.column_stack([np.full(probe.num_faces, 3), np.asarray(probe.faces)]).reshape(-1)
+        plotter.add_mesh(pv.PolyData(vertices, faces).extract_feature_edges(30.0), color="steelblue", line_width=2)
+    plotter.add_text(title, font_size=12)
+    plotter.show_bounds(xtitle="x [mm]", ytitle="y [mm]", ztitle="z [mm]", font_size=10)
+    _view_from(plotter, skin.bounds, side=-1.0)
+    _save(plotter, path)
