@@ -20,6 +20,7 @@ from hydrotact.contact import (
     make_cylinder_probe,
     make_pose,
     make_sphere_probe,
+    make_tet_clusters,
 )
 from hydrotact.field import calc_distance_field, make_laplace_problem, make_pressure_field, solve_strain
 from hydrotact.mesh import FREE, make_ball, make_box, make_seed_mesh
@@ -108,17 +109,21 @@ def _assert_same_surface(culled, brute):
 def test_broad_phase_matches_brute_force_soft_rigid():
     field = make_pressure_field(mesh := make_seed_mesh("pad5x5", 1.1e-3), calc_distance_field(mesh), E)
     probe = make_cylinder_probe(2e-3, length=3e-3, num_sides=12)
+    clusters = make_tet_clusters(field.vertices, field.tets, cluster_size=16)
     for xyz in ([0.3e-3, -0.2e-3, 3.6e-3], [6.3e-3, 0.0, 3.5e-3], [0.0, 0.0, 5e-3]):
         X = make_pose(xyz, [0.05, 0.1, 0.2])
-        culled = calc_soft_rigid_surface(field, probe, X, Capacity(1024, 256, 4096))
         brute = calc_soft_rigid_surface(field, probe, X, brute_force=True)
-        _assert_same_surface(culled, brute)
+        _assert_same_surface(calc_soft_rigid_surface(field, probe, X, Capacity(1024, 256, 4096)), brute)
+        _assert_same_surface(calc_soft_rigid_surface(field, probe, X, Capacity(1024, 256, 4096), clusters=clusters), brute)
 
 
 def test_broad_phase_matches_brute_force_half_space_and_soft_soft():
     mesh, field = _ball_field(5e-3, 2)
     X = make_pose([0.2e-3, 0.0, 3.9e-3], [0.2, 0.0, 0.0])
-    _assert_same_surface(calc_half_space_surface(field, X), calc_half_space_surface(field, X, brute_force=True))
+    brute = calc_half_space_surface(field, X, brute_force=True)
+    _assert_same_surface(calc_half_space_surface(field, X), brute)
+    clusters = make_tet_clusters(field.vertices, field.tets, cluster_size=16)
+    _assert_same_surface(calc_half_space_surface(field, X, Capacity(512, 0, 1024), clusters=clusters), brute)
     X_SB = make_pose([1e-3, 0.5e-3, 9e-3], [0.3, 0.1, 0.0])
     culled = calc_soft_soft_surface(field, field, X_SB, Capacity(512, 512, 4096))
     brute = calc_soft_soft_surface(field, field, X_SB, brute_force=True)
@@ -131,7 +136,7 @@ def test_overflow_is_detected_and_retried():
     probe = make_cylinder_probe(2e-3, num_sides=16)
     X = make_pose([0.0, 0.0, 3.5e-3])
     small = calc_soft_rigid_surface(field, probe, X, Capacity(64, 64, 128))
-    assert bool(small.overflow) and int(small.num_candidates) > 128
+    assert bool(small.overflow) and int(small.needed[2]) > 128
     surface, capacity = compute_contact_surface(field, probe, X, Capacity(64, 64, 128))
     assert not bool(surface.overflow) and capacity.pairs > 128
     reference, _ = compute_contact_surface(field, probe, X)

@@ -2,7 +2,7 @@
 and the wrench they exert."""
 
 from ._api import calc_contact_surface as calc_contact_surface, compute_contact_surface as compute_contact_surface
-from ._broadphase import Capacity as Capacity
+from ._broadphase import Capacity as Capacity, TetClusters as TetClusters, make_tet_clusters as make_tet_clusters
 from ._half_space import calc_half_space_surface as calc_half_space_surface
 from ._polygon import calc_polygon_integrals as calc_polygon_integrals, clip_polygon as clip_polygon
 from ._pose import Pose as Pose, calc_rotation_from_vector as calc_rotation_from_vector, make_pose as make_pose

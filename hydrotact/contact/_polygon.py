@@ -41,7 +41,7 @@ def clip_polygon(vertices, count, normal, offset):
     emitted = keep.astype(jnp.int32) + crosses.astype(jnp.int32)
     ends = jnp.cumsum(emitted)
     new_count = jnp.minimum(ends[-1], capacity)
-    source = jnp.minimum(jnp.searchsorted(ends, index, side="right"), capacity - 1)
+    source = jnp.minimum(jnp.searchsorted(ends, index, side="right", method="compare_all"), capacity - 1)
     first_of_source = (ends[source] - emitted[source]) == index
     own = keep[source] & first_of_source
     out = jnp.where(own[:, None], vertices[source], crossing[source])

@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 
 from ..field import PressureField
-from ._broadphase import Capacity, boxes_overlap, calc_boxes, select, select_pairs
+from ._broadphase import Capacity, TetClusters, box_meets_region, boxes_overlap, calc_boxes, select, select_clustered_tets, select_pairs
 from ._polygon import calc_polygon_integrals, clip_polygon_by_tet_faces
 from ._pose import Pose
 from ._rigid import RigidSurface
@@ -46,7 +46,12 @@ def _polygon_from_pair(tet_vertices, triangle, normal, offset, gradient):
 
 
 def calc_soft_rigid_surface(
-    field: PressureField, rigid: RigidSurface, X_SR: Pose, capacity: Capacity = Capacity(), brute_force: bool = False
+    field: PressureField,
+    rigid: RigidSurface,
+    X_SR: Pose,
+    capacity: Capacity = Capacity(),
+    brute_force: bool = False,
+    clusters: TetClusters | None = None,
 ) -> ContactSurface:
     """The contact surface of a soft body and a rigid surface at pose X_SR (pure,
     jittable, vmappable over X_SR, differentiable in X_SR, E and the field).
@@ -54,6 +59,7 @@ def calc_soft_rigid_surface(
     Normals point out of the rigid body, the direction of the force on the soft body.
     `brute_force` clips every tet against every triangle (the reference for the broad
     phase; its buffers hold num_tets x num_faces polygons and never overflow).
+    `clusters` (from :func:`make_tet_clusters`) makes the tet search hierarchical.
     """
     vertices_S = X_SR.apply(jnp.asarray(rigid.vertices_R, field.vertices.dtype))
     triangles = vertices_S[rigid.faces]
@@ -73,18 +79,26 @@ def calc_soft_rigid_surface(
         tet_index = jnp.repeat(jnp.arange(num_tets), num_tris)
         tri_index = jnp.tile(jnp.arange(num_tris), num_tets)
         pair_valid = jnp.ones(tet_index.shape, dtype=bool)
-        num_pairs = jnp.asarray(tet_index.shape[0])
+        needed = jnp.array([num_tets, num_tris, tet_index.shape[0]])
         overflow = jnp.asarray(False)
     else:
-        tets, tets_valid, num_tets = select(boxes_overlap(tet_lo, tet_hi, region_lo[None], region_hi[None]), capacity.tets)
+        if clusters is None:
+            tets, tets_valid, num_tets = select(boxes_overlap(tet_lo, tet_hi, region_lo[None], region_hi[None]), capacity.tets)
+        else:
+            meets = box_meets_region(region_lo, region_hi)
+            tets, tets_valid, num_tets = select_clustered_tets(clusters, tet_lo, tet_hi, meets, capacity.tets)
         tris, tris_valid, num_tris = select(boxes_overlap(tri_lo, tri_hi, region_lo[None], region_hi[None]), capacity.others)
         safe_tets, safe_tris = jnp.maximum(tets, 0), jnp.maximum(tris, 0)
+        # Separating plane: a tet wholly on one side of a triangle's plane cannot meet it.
+        plane_offsets = jnp.sum(triangle_normals * triangles[:, 0], axis=-1)
+        heights = jnp.einsum("tkd,rd->trk", tet_points[safe_tets], triangle_normals[safe_tris]) - plane_offsets[safe_tris][None, :, None]
+        straddles = (jnp.min(heights, axis=-1) <= 0.0) & (jnp.max(heights, axis=-1) >= 0.0)
         i, j, pair_valid, num_pairs = select_pairs(
-            tet_lo[safe_tets], tet_hi[safe_tets], tets_valid, tri_lo[safe_tris], tri_hi[safe_tris], tris_valid, capacity.pairs
+            tet_lo[safe_tets], tet_hi[safe_tets], tets_valid, tri_lo[safe_tris], tri_hi[safe_tris], tris_valid, capacity.pairs, straddles
         )
         tet_index, tri_index = safe_tets[i], safe_tris[j]
-        overflow = (num_tets > capacity.tets) | (num_tris > capacity.others) | (num_pairs > capacity.pairs)
-        num_pairs = jnp.max(jnp.array([num_tets, num_tris, num_pairs]))
+        needed = jnp.array([num_tets, num_tris, num_pairs])
+        overflow = jnp.any(needed > jnp.array([tets.shape[0], capacity.others, capacity.pairs]))
 
     offsets, gradients = calc_tet_pressure_planes(field)
     normals = triangle_normals[tri_index]
@@ -106,5 +120,5 @@ def calc_soft_rigid_surface(
         tet_index=jnp.where(pair_valid, tet_index, -1),
         other_index=jnp.where(pair_valid, tri_index, -1),
         overflow=overflow,
-        num_candidates=num_pairs,
+        needed=needed,
     )

@@ -56,15 +56,15 @@ def calc_soft_soft_surface(
         a = jnp.repeat(jnp.arange(points_A.shape[0]), points_B.shape[0])
         b = jnp.tile(jnp.arange(points_B.shape[0]), points_A.shape[0])
         pair_valid = jnp.ones(a.shape, dtype=bool)
-        overflow, num_candidates = jnp.asarray(False), jnp.asarray(a.shape[0])
+        overflow, needed = jnp.asarray(False), jnp.array([points_A.shape[0], points_B.shape[0], a.shape[0]])
     else:
         tets_A, valid_A, num_A = select(boxes_overlap(lo_A, hi_A, region_lo[None], region_hi[None]), capacity.tets)
         tets_B, valid_B, num_B = select(boxes_overlap(lo_B, hi_B, region_lo[None], region_hi[None]), capacity.others)
         safe_A, safe_B = jnp.maximum(tets_A, 0), jnp.maximum(tets_B, 0)
         i, j, pair_valid, num_pairs = select_pairs(lo_A[safe_A], hi_A[safe_A], valid_A, lo_B[safe_B], hi_B[safe_B], valid_B, capacity.pairs)
         a, b = safe_A[i], safe_B[j]
-        overflow = (num_A > capacity.tets) | (num_B > capacity.others) | (num_pairs > capacity.pairs)
-        num_candidates = jnp.max(jnp.array([num_A, num_B, num_pairs]))
+        needed = jnp.array([num_A, num_B, num_pairs])
+        overflow = jnp.any(needed > jnp.array([capacity.tets, capacity.others, capacity.pairs]))
     vertices, pressures, counts, normals, keep, areas, integrals, first_moments, pressure_moments = jax.vmap(_pair_polygon)(
         points_A[a], points_B[b], offsets_A[a], gradients_A[a], offsets_B[b], gradients_B[b]
     )
@@ -82,5 +82,5 @@ def calc_soft_soft_surface(
         tet_index=jnp.where(pair_valid, a, -1),
         other_index=jnp.where(pair_valid, b, -1),
         overflow=overflow,
-        num_candidates=num_candidates,
+        needed=needed,
     )

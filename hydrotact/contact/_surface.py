@@ -17,9 +17,9 @@ class ContactSurface(eqx.Module):
     the unit normal `normals_S` along which the pressure pushes the soft body
     (for soft-soft: body A). Units: m, Pa, N.
 
-    `overflow` is True when more candidate pairs existed than the buffers hold: the
-    surface is then incomplete, and the host entry points retry with larger buffers
-    or raise; `num_candidates` says how many slots would have been needed.
+    `overflow` is True when more candidates existed than the buffers hold: the surface
+    is then incomplete, and the host entry points retry with larger buffers or raise;
+    `needed` says how many entries each buffer (tets, others, pairs) would have needed.
 
     **Fields:**
 
@@ -32,7 +32,8 @@ class ContactSurface(eqx.Module):
     - `first_moments_S`: (capacity, 3) int x dA; `pressure_moments_S`: (capacity, 3) int p x dA.
     - `tet_index`, `other_index`: (capacity,) the soft tet, and the rigid triangle or
       the other body's tet (-1 for a half-space).
-    - `overflow`, `num_candidates`: scalars.
+    - `overflow`: scalar; `needed`: (3,) entries needed by the tets, others and pairs
+      buffers of the broad phase.
     """
 
     vertices_S: Float[Array, "capacity 8 3"]
@@ -47,7 +48,7 @@ class ContactSurface(eqx.Module):
     tet_index: Int[Array, " capacity"]
     other_index: Int[Array, " capacity"]
     overflow: Bool[Array, ""]
-    num_candidates: Int[Array, ""]
+    needed: Int[Array, " 3"]
 
     @property
     def capacity(self) -> int:

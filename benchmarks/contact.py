@@ -1,0 +1,176 @@
+"""Benchmark: contact surfaces per second, against Drake's query in the same run.
+
+Cases: pad5x5 (27k tets) pressed by the 2 mm cylinder probe (192 triangles), and
+sphere8 (28k tets) pressed by a rigid half-space; the distance field on both, so
+Drake computes the same surfaces (tests/test_contact_drake.py checks they agree).
+Poses sweep the probe across the sensor at a fixed depth.
+
+- Drake: `QueryObject.ComputeContactSurfaces` (polygons), one pose at a time, after
+  updating the free body's pose; mean seconds per query.
+- hydrotact: the contact surface and its wrench for a batch of poses in one jitted
+  call (vmap over chunks of 64 poses, lax.map over chunks, so memory stays bounded),
+  float64, with the clustered tet search; timed after compilation, median of repeats.
+
+Run: `.venv/bin/python benchmarks/contact.py [--batches 1 64 4096]`.
+"""
+
+import argparse
+import json
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+from _machine import describe_machine  # noqa: E402
+
+from hydrotact.contact import (  # noqa: E402
+    HalfSpace,
+    calc_contact_surface,
+    compute_contact_surface,
+    make_cylinder_probe,
+    make_pose,
+    make_tet_clusters,
+)
+from hydrotact.field import calc_distance_field, make_pressure_field  # noqa: E402
+from hydrotact.mesh import make_seed_mesh, read_mesh, write_mesh  # noqa: E402
+
+MODULUS = 2e5
+CHUNK = 64
+
+
+def _poses(case, count):
+    if case == "pad5x5 + 2 mm cylinder":
+        x = np.linspace(-4.4e-3, 4.4e-3, count)
+        return np.column_stack([x, 0.3 * x, np.full(count, 4e-3 - 0.4e-3)])
+    x = np.linspace(-3e-3, 3e-3, count)
+    return np.column_stack([x, -0.5 * x, np.full(count, 14.0e-3 - 1e-3)])
+
+
+def _drake_seconds_per_query(vtk_path, other, translations, repeats=3):
+    from pydrake.geometry import (
+        AddCompliantHydroelasticProperties,
+        AddRigidHydroelasticProperties,
+        HydroelasticContactRepresentation,
+        Mesh,
+        ProximityProperties,
+    )
+    from pydrake.math import RigidTransform
+    from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+    from pydrake.multibody.tree import SpatialInertia
+    from pydrake.systems.framework import DiagramBuilder
+
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+    body = plant.AddRigidBody("probe", SpatialInertia.SolidBoxWithMass(0.01, 0.01, 0.01, 0.01))
+    soft = ProximityProperties()
+    AddCompliantHydroelasticProperties(1.0, MODULUS, soft)
+    plant.RegisterCollisionGeometry(plant.world_body(), RigidTransform(), Mesh(str(vtk_path)), "sensor", soft)
+    rigid = ProximityProperties()
+    AddRigidHydroelasticProperties(1.0, rigid)
+    plant.RegisterCollisionGeometry(body, RigidTransform(), other, "probe", rigid)
+    plant.Finalize()
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    plant_context = plant.GetMyContextFromRoot(context)
+    scene_context = scene_graph.GetMyContextFromRoot(context)
+    flip = isinstance(other, type(None)) is False and type(other).__name__ == "HalfSpace"
+    rotation = np.diag([1.0, -1.0, -1.0]) if flip else np.eye(3)
+    counts = []
+    timings = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        for translation in translations:
+            X = np.eye(4)
+            X[:3, :3], X[:3, 3] = rotation, translation
+            plant.SetFreeBodyPose(plant_context, body, RigidTransform(X))
+            surfaces = scene_graph.get_query_output_port().Eval(scene_context).ComputeContactSurfaces(
+                HydroelasticContactRepresentation.kPolygon
+            )
+            counts.append(len(surfaces))
+        timings.append((time.perf_counter() - start) / len(translations))
+    assert min(counts) == 1, "every benchmark pose must be in contact"
+    return statistics.median(timings)
+
+
+def _ours_seconds_per_batch(field, other, translations, capacity, repeats=3):
+    clusters = make_tet_clusters(field.vertices, field.tets)
+
+    def wrench(translation):
+        surface = calc_contact_surface(field, other, make_pose(translation), capacity, clusters)
+        force, torque = surface.calc_wrench()
+        return force, torque, surface.total_area, surface.overflow
+
+    count = len(translations)
+    chunk = min(CHUNK, count)
+    padded = int(np.ceil(count / chunk)) * chunk
+    batch = jnp.asarray(np.concatenate([translations, np.repeat(translations[-1:], padded - count, axis=0)]))
+
+    @jax.jit
+    def run(batch):
+        return jax.lax.map(jax.vmap(wrench), batch.reshape(-1, chunk, 3))
+
+    result = jax.block_until_ready(run(batch))
+    assert not bool(jnp.any(result[3])), "capacity too small for the benchmark poses"
+    timings = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        jax.block_until_ready(run(batch))
+        timings.append(time.perf_counter() - start)
+    return statistics.median(timings), np.asarray(result[0]).reshape(-1, 3)[:count]
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--batches", type=int, nargs="+", default=[1, 64, 4096])
+    args = parser.parse_args()
+    from pydrake.geometry import HalfSpace as DrakeHalfSpace
+
+    machine = describe_machine()
+    print(f"machine: {machine}")
+    rows = []
+    with tempfile.TemporaryDirectory() as scratch:
+        probe = make_cylinder_probe(2e-3, length=6e-3)
+        probe_path = Path(scratch) / "probe.obj"
+        probe.to_trimesh().export(probe_path)
+        from pydrake.geometry import Mesh
+
+        cases = {
+            "pad5x5 + 2 mm cylinder": ("pad5x5", probe, Mesh(str(probe_path))),
+            "sphere8 + half-space": ("sphere8", HalfSpace(), DrakeHalfSpace()),
+        }
+        for case, (sensor, ours_other, drake_other) in cases.items():
+            vtk = write_mesh(make_seed_mesh(sensor), Path(scratch) / f"{sensor}.vtk")
+            mesh, _ = read_mesh(vtk)
+            field = make_pressure_field(mesh, calc_distance_field(mesh), MODULUS)
+            drake_translations = _poses(case, 64)
+            drake_seconds = _drake_seconds_per_query(vtk, drake_other, drake_translations)
+            _, capacity = compute_contact_surface(field, ours_other, jax.vmap(make_pose)(jnp.asarray(_poses(case, 64))))
+            for batch in args.batches:
+                seconds, _ = _ours_seconds_per_batch(field, ours_other, _poses(case, batch), capacity)
+                row = {
+                    "case": case,
+                    "batch": batch,
+                    "capacity_pairs": capacity.pairs,
+                    "ours_surfaces_per_s": batch / seconds,
+                    "drake_surfaces_per_s": 1.0 / drake_seconds,
+                    "ratio": (batch / seconds) * drake_seconds,
+                }
+                rows.append(row)
+                print(
+                    f"| {case} | {batch} | {row['ours_surfaces_per_s']:,.0f} | {row['drake_surfaces_per_s']:,.0f} | {row['ratio']:.2f} |",
+                    flush=True,
+                )
+    out = Path(__file__).parent / "results" / f"contact-{machine['jax_backend']}.json"
+    out.parent.mkdir(exist_ok=True)
+    out.write_text(json.dumps({"machine": machine, "rows": rows}, indent=2) + "\n")
+    print(f"written: {out}")
+
+
+if __name__ == "__main__":
+    main()
