@@ -137,7 +137,7 @@ def main():
     with tempfile.TemporaryDirectory() as scratch:
         probe = make_cylinder_probe(2e-3, length=6e-3)
         probe_path = Path(scratch) / "probe.obj"
-        probe.to_trimesh().export(probe_path)
+        probe.write_obj(probe_path)
         from pydrake.geometry import Mesh
 
         cases = {

@@ -45,7 +45,7 @@ def main():
                           lambda path=path, top=top, depth=depth: drake_contact_surfaces(path, MODULUS, DrakeHalfSpace(), X_WO=pressing_plane_pose(top - depth))))
         path, mesh, field = sensor(make_seed_mesh("pad5x5"), "pad5x5")
         probe = make_cylinder_probe(2e-3, length=6e-3)
-        probe.to_trimesh().export(scratch / "probe.obj")
+        probe.write_obj(scratch / "probe.obj")
         for label, x, y in (("centre", 0.0, 0.0), ("next cell", 2.2e-3, 0.0), ("overhanging edge", 6.2e-3, 1.1e-3)):
             X = np.eye(4)
             X[:3, 3] = [x, y, 3.6e-3]

@@ -2,7 +2,7 @@
 
 Drake loads hydrotact's meshes (legacy VTK, compliant, so it uses the distance field
 p = E d / max d, which hydrotact reproduces exactly) and rigid probes (OBJ), at the
-same poses. Total area, force on the sensor and centroid must agree to 1e-6.
+same poses. Total area, force on the sensor and centroid must agree to 1e-9 (the issue asks 1e-6).
 """
 
 import jax.numpy as jnp
@@ -18,7 +18,7 @@ pytest.importorskip("pydrake")
 pytestmark = pytest.mark.drake
 
 MODULUS = 2e5
-RTOL = 1e-6
+RTOL = 1e-9  # the issue asks 1e-6; measured agreement is ~1e-15 (benchmarks/RESULTS.md)
 
 
 def _sensor(tmp_path, mesh, name):
@@ -56,7 +56,7 @@ def test_pad_against_the_2mm_cylinder(tmp_path, label, x, y):
     path, mesh, field = _sensor(tmp_path, make_seed_mesh("pad5x5"), "pad5x5")
     probe = make_cylinder_probe(2e-3, length=6e-3)
     probe_path = tmp_path / "probe.obj"
-    probe.to_trimesh().export(probe_path)
+    probe.write_obj(probe_path)
     X_SR = np.eye(4)
     X_SR[:3, 3] = [x, y, 4e-3 - 0.4e-3]
     ours, _ = compute_contact_surface(field, probe, make_pose(X_SR[:3, 3]))

@@ -12,6 +12,7 @@ import numpy as np
 import trimesh
 
 from .._errors import HydrotactError
+from .._files import atomic_path
 from .._types import Array, Float, Int
 from ..mesh import check_surface
 
@@ -34,6 +35,12 @@ class RigidSurface(eqx.Module):
 
     def to_trimesh(self) -> trimesh.Trimesh:
         return trimesh.Trimesh(np.asarray(self.vertices_R), np.asarray(self.faces), process=False)
+
+    def write_obj(self, path) -> None:
+        """Write the surface as OBJ with every coordinate at full double precision
+        (trimesh's default keeps 8 decimals, 10 nm: too coarse to compare with Drake)."""
+        with atomic_path(path) as tmp:
+            self.to_trimesh().export(str(tmp), file_type="obj", digits=17)
 
 
 class HalfSpace(eqx.Module):
