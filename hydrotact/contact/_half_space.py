@@ -22,7 +22,7 @@ from ._broadphase import Capacity, TetClusters, box_meets_plane, calc_boxes, sel
 from ._polygon import calc_polygon_integrals, clip_polygon_by_tet_faces
 from ._pose import Pose
 from ._soft_rigid import is_normal_along_gradient
-from ._surface import POLYGON_CAPACITY, ContactSurface
+from ._surface import POLYGON_CAPACITY, ContactSurface, assemble_surface
 
 TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
 
@@ -134,24 +134,8 @@ def calc_half_space_surface(
         vertices, pressures, count = slice_tet_marching(tet_vertices, tet_pressures, tet_heights, push)
         return (vertices, pressures, count, *calc_polygon_integrals(vertices, count, pressures, push))
 
-    vertices, pressures, counts, areas, integrals, first_moments, pressure_moments = jax.vmap(polygon)(
-        tet_points[tet_index], vertex_pressures[tet_index], tet_heights
-    )
+    polygons = jax.vmap(polygon)(tet_points[tet_index], vertex_pressures[tet_index], tet_heights)
     normals = jnp.broadcast_to(push[None], (size, 3))
     keep = jax.vmap(is_normal_along_gradient, in_axes=(None, 0))(push, gradients[tet_index])
-    valid = tets_valid & (counts >= 3) & (areas > 0.0) & keep
-    return ContactSurface(
-        vertices_S=vertices,
-        pressures=pressures,
-        counts=counts,
-        normals_S=normals,
-        valid=valid,
-        areas=areas,
-        pressure_integrals=integrals,
-        first_moments_S=first_moments,
-        pressure_moments_S=pressure_moments,
-        tet_index=jnp.where(tets_valid, tet_index, -1),
-        other_index=jnp.full(size, -1),
-        overflow=(num_tets > size) | near_overflow,
-        needed=jnp.array([num_near, 0, num_tets]),
-    )
+    overflow = (num_tets > size) | near_overflow
+    return assemble_surface(polygons, normals, tets_valid, keep, tet_index, jnp.full(size, -1), overflow, jnp.array([num_near, 0, num_tets]))

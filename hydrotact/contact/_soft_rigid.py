@@ -15,7 +15,7 @@ from ._broadphase import Capacity, TetClusters, box_meets_region, boxes_overlap,
 from ._polygon import calc_polygon_integrals, clip_polygon_by_tet_faces
 from ._pose import Pose
 from ._rigid import RigidSurface
-from ._surface import POLYGON_CAPACITY, ContactSurface
+from ._surface import POLYGON_CAPACITY, ContactSurface, assemble_surface
 
 
 def calc_tet_pressure_planes(field: PressureField):
@@ -105,20 +105,5 @@ def calc_soft_rigid_surface(
     polygon = jax.vmap(_polygon_from_pair)(
         tet_points[tet_index], triangles[tri_index], normals, offsets[tet_index], gradients[tet_index]
     )
-    vertices, pressures, counts, areas, integrals, first_moments, pressure_moments = polygon
-    valid = pair_valid & (counts >= 3) & (areas > 0.0) & jax.vmap(is_normal_along_gradient)(normals, gradients[tet_index])
-    return ContactSurface(
-        vertices_S=vertices,
-        pressures=pressures,
-        counts=counts,
-        normals_S=normals,
-        valid=valid,
-        areas=areas,
-        pressure_integrals=integrals,
-        first_moments_S=first_moments,
-        pressure_moments_S=pressure_moments,
-        tet_index=jnp.where(pair_valid, tet_index, -1),
-        other_index=jnp.where(pair_valid, tri_index, -1),
-        overflow=overflow,
-        needed=needed,
-    )
+    keep = jax.vmap(is_normal_along_gradient)(normals, gradients[tet_index])
+    return assemble_surface(polygon, normals, pair_valid, keep, tet_index, tri_index, overflow, needed)

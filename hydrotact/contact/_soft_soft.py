@@ -16,7 +16,7 @@ from ._half_space import slice_tet
 from ._polygon import calc_polygon_integrals, clip_polygon_by_tet_faces
 from ._pose import Pose
 from ._soft_rigid import calc_tet_pressure_planes, is_normal_along_gradient
-from ._surface import ContactSurface
+from ._surface import ContactSurface, assemble_surface
 
 
 def _pair_polygon(tet_a, tet_b, offset_a, gradient_a, offset_b, gradient_b):
@@ -31,7 +31,8 @@ def _pair_polygon(tet_a, tet_b, offset_a, gradient_a, offset_b, gradient_b):
     count = jnp.where(degenerate, 0, count)
     pressures = offset_a + vertices @ gradient_a
     keep = is_normal_along_gradient(push, gradient_a) & is_normal_along_gradient(-push, gradient_b)
-    return (vertices, pressures, count, push, keep & ~degenerate, *calc_polygon_integrals(vertices, count, pressures, push))
+    polygon = (vertices, pressures, count, *calc_polygon_integrals(vertices, count, pressures, push))
+    return polygon, push, keep & ~degenerate
 
 
 def calc_soft_soft_surface(
@@ -65,22 +66,7 @@ def calc_soft_soft_surface(
         a, b = safe_A[i], safe_B[j]
         needed = jnp.array([num_A, num_B, num_pairs])
         overflow = jnp.any(needed > jnp.array([capacity.tets, capacity.others, capacity.pairs]))
-    vertices, pressures, counts, normals, keep, areas, integrals, first_moments, pressure_moments = jax.vmap(_pair_polygon)(
+    polygons, normals, keep = jax.vmap(_pair_polygon)(
         points_A[a], points_B[b], offsets_A[a], gradients_A[a], offsets_B[b], gradients_B[b]
     )
-    valid = pair_valid & keep & (counts >= 3) & (areas > 0.0)
-    return ContactSurface(
-        vertices_S=vertices,
-        pressures=pressures,
-        counts=counts,
-        normals_S=normals,
-        valid=valid,
-        areas=areas,
-        pressure_integrals=integrals,
-        first_moments_S=first_moments,
-        pressure_moments_S=pressure_moments,
-        tet_index=jnp.where(pair_valid, a, -1),
-        other_index=jnp.where(pair_valid, b, -1),
-        overflow=overflow,
-        needed=needed,
-    )
+    return assemble_surface(polygons, normals, pair_valid, keep, a, b, overflow, needed)

@@ -88,3 +88,29 @@ class ContactSurface(eqx.Module):
         weights = jnp.where(self.valid, self.pressure_integrals, 0.0)
         moments = jnp.sum(jnp.where(self.valid[..., None], self.pressure_moments_S, 0.0), axis=-2)
         return safe_div(moments, jnp.sum(weights, axis=-1)[..., None])
+
+
+def assemble_surface(polygons, normals_S, pair_valid, keep, tet_index, other_index, overflow, needed) -> ContactSurface:
+    """Fill a ContactSurface from the per-slot polygons of a kernel.
+
+    `polygons` is (vertices, pressures, counts, areas, pressure integrals, first
+    moments, pressure moments), as `calc_polygon_integrals` and the clippers give them.
+    A slot is valid when its pair is real, it passes `keep` (the gradient filter) and
+    its polygon has positive area. Indices of unused slots read -1.
+    """
+    vertices, pressures, counts, areas, integrals, first_moments, pressure_moments = polygons
+    return ContactSurface(
+        vertices_S=vertices,
+        pressures=pressures,
+        counts=counts,
+        normals_S=normals_S,
+        valid=pair_valid & keep & (counts >= 3) & (areas > 0.0),
+        areas=areas,
+        pressure_integrals=integrals,
+        first_moments_S=first_moments,
+        pressure_moments_S=pressure_moments,
+        tet_index=jnp.where(pair_valid, tet_index, -1),
+        other_index=jnp.where(pair_valid, other_index, -1),
+        overflow=overflow,
+        needed=needed,
+    )
