@@ -4,7 +4,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import central_difference
 
 from hydrotact import HydrotactError
 from hydrotact.contact import (

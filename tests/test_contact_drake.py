@@ -5,7 +5,6 @@ p = E d / max d, which hydrotact reproduces exactly) and rigid probes (OBJ), at 
 same poses. Total area, force on the sensor and centroid must agree to 1e-9 (the issue asks 1e-6).
 """
 
-import jax.numpy as jnp
 import numpy as np
 import pytest
 from drake_reference import drake_contact_surfaces, integrate_drake_surface, pressing_plane_pose

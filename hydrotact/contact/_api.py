@@ -71,4 +71,7 @@ def compute_contact_surface(
                 f"the contact needs more than {MAX_PAIRS} candidate pairs ({int(needed[2])} found); "
                 "the bodies overlap too deeply"
             )
-        capacity = capacity.grown_to(needed)
+        grown = capacity.grown_to(needed)
+        if grown == capacity:  # a count that does not map onto one buffer: grow them all
+            grown = Capacity(2 * capacity.tets, 2 * capacity.others, 2 * capacity.pairs)
+        capacity = grown
