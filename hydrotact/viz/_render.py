@@ -22,11 +22,12 @@ def _faces_polydata(mesh: TetMesh, tag: int) -> pv.PolyData:
     return pv.PolyData(np.asarray(mesh.vertices, dtype=np.float64) * 1e3, cells)
 
 
-def _view_from(plotter: pv.Plotter, bounds_mm, side: float) -> None:
-    """Look at the box `bounds_mm` from above, from the -y (side=-1) or +y side."""
+def _view_from(plotter: pv.Plotter, bounds_mm, side: float, elevation: float = 0.9) -> None:
+    """Look at the box `bounds_mm` from the -y (side=-1) or +y side, from above
+    (elevation > 0) or below (elevation < 0)."""
     lo, hi = np.asarray(bounds_mm[0::2]), np.asarray(bounds_mm[1::2])
     centre, size = 0.5 * (lo + hi), float(np.linalg.norm(hi - lo))
-    eye = centre + size * np.array([0.55, 1.5 * side, 0.9])
+    eye = centre + size * np.array([0.55, 1.5 * side, elevation])
     plotter.camera_position = [tuple(eye), tuple(centre), (0.0, 0.0, 1.0)]
 
 
@@ -50,7 +51,7 @@ def render_mesh(mesh: TetMesh, path, title: str = "") -> None:
         title = f"{title}\ncore (bonded) faces in orange" if title else "core (bonded) faces in orange"
     plotter.add_text(title, font_size=12)
     plotter.show_bounds(xtitle="x [mm]", ytitle="y [mm]", ztitle="z [mm]", font_size=10)
-    _view_from(plotter, grid.bounds, side=1.0)
+    _view_from(plotter, grid.bounds, side=1.0, elevation=-0.6)  # from below: the bonded base shows
     _save(plotter, path)
 
 
