@@ -17,6 +17,7 @@ Run: `.venv/bin/python benchmarks/contact.py [--batches 1 64 4096]`.
 import argparse
 import json
 import statistics
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -28,6 +29,9 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 from _machine import describe_machine  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "tests"))
+from drake_reference import DrakeScene  # noqa: E402
 
 from hydrotact.contact import (  # noqa: E402
     HalfSpace,
@@ -53,46 +57,21 @@ def _poses(case, count):
 
 
 def _drake_seconds_per_query(vtk_path, other, translations, repeats=3):
-    from pydrake.geometry import (
-        AddCompliantHydroelasticProperties,
-        AddRigidHydroelasticProperties,
-        HydroelasticContactRepresentation,
-        Mesh,
-        ProximityProperties,
-    )
-    from pydrake.math import RigidTransform
-    from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
-    from pydrake.multibody.tree import SpatialInertia
-    from pydrake.systems.framework import DiagramBuilder
-
-    builder = DiagramBuilder()
-    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
-    body = plant.AddRigidBody("probe", SpatialInertia.SolidBoxWithMass(0.01, 0.01, 0.01, 0.01))
-    soft = ProximityProperties()
-    AddCompliantHydroelasticProperties(1.0, MODULUS, soft)
-    plant.RegisterCollisionGeometry(plant.world_body(), RigidTransform(), Mesh(str(vtk_path)), "sensor", soft)
-    rigid = ProximityProperties()
-    AddRigidHydroelasticProperties(1.0, rigid)
-    plant.RegisterCollisionGeometry(body, RigidTransform(), other, "probe", rigid)
-    plant.Finalize()
-    diagram = builder.Build()
-    context = diagram.CreateDefaultContext()
-    plant_context = plant.GetMyContextFromRoot(context)
-    scene_context = scene_graph.GetMyContextFromRoot(context)
-    flip = isinstance(other, type(None)) is False and type(other).__name__ == "HalfSpace"
-    rotation = np.diag([1.0, -1.0, -1.0]) if flip else np.eye(3)
+    """Drake's seconds per query. The probe is fixed and the sensor moves by the
+    opposite translation: the same relative poses as ours."""
+    flip = type(other).__name__ == "HalfSpace"
+    X_WO = np.eye(4)
+    if flip:  # Drake's half-space is solid below z = 0; ours above
+        X_WO[:3, :3] = np.diag([1.0, -1.0, -1.0])
+    scene = DrakeScene(vtk_path, MODULUS, other, X_WO=X_WO)
     counts = []
     timings = []
     for _ in range(repeats):
         start = time.perf_counter()
         for translation in translations:
-            X = np.eye(4)
-            X[:3, :3], X[:3, 3] = rotation, translation
-            plant.SetFreeBodyPose(plant_context, body, RigidTransform(X))
-            surfaces = scene_graph.get_query_output_port().Eval(scene_context).ComputeContactSurfaces(
-                HydroelasticContactRepresentation.kPolygon
-            )
-            counts.append(len(surfaces))
+            X_WS = np.eye(4)
+            X_WS[:3, 3] = -np.asarray(translation)
+            counts.append(len(scene.query(X_WS)))
         timings.append((time.perf_counter() - start) / len(translations))
     assert min(counts) == 1, "every benchmark pose must be in contact"
     return statistics.median(timings)
@@ -138,10 +117,8 @@ def main():
         probe = make_cylinder_probe(2e-3, length=6e-3)
         probe_path = Path(scratch) / "probe.obj"
         probe.write_obj(probe_path)
-        from pydrake.geometry import Mesh
-
         cases = {
-            "pad5x5 + 2 mm cylinder": ("pad5x5", probe, Mesh(str(probe_path))),
+            "pad5x5 + 2 mm cylinder": ("pad5x5", probe, str(probe_path)),
             "sphere8 + half-space": ("sphere8", HalfSpace(), DrakeHalfSpace()),
         }
         for case, (sensor, ours_other, drake_other) in cases.items():

@@ -16,47 +16,59 @@ def _rigid_transform(X):
     return RigidTransform(np.asarray(X, dtype=float))
 
 
-def drake_contact_surfaces(soft_vtk, modulus, other, X_WS=None, X_WO=None, other_modulus=None):
-    """Contact surfaces between a compliant mesh (`soft_vtk`, at X_WS, default
-    identity) and `other` at X_WO: a Drake shape or a path (.obj rigid, .vtk compliant
-    with `other_modulus`). Returns [(ContactSurface, whether the soft body is M)].
-    The soft body is placed at X_WS by a free body pose."""
-    from pydrake.geometry import (
-        AddCompliantHydroelasticProperties,
-        AddRigidHydroelasticProperties,
-        HydroelasticContactRepresentation,
-        Mesh,
-        ProximityProperties,
-    )
-    from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
-    from pydrake.multibody.tree import SpatialInertia
-    from pydrake.systems.framework import DiagramBuilder
+class DrakeScene:
+    """A compliant mesh (`soft_vtk`, on a free body) and `other` fixed at X_WO: a Drake
+    shape or a path (.obj rigid, .vtk compliant with `other_modulus`). Build once,
+    then query at as many soft-body poses X_WS as needed."""
 
-    builder = DiagramBuilder()
-    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
-    body = plant.AddRigidBody("elastomer", SpatialInertia.SolidBoxWithMass(0.01, 0.01, 0.01, 0.01))
-    soft = ProximityProperties()
-    AddCompliantHydroelasticProperties(1.0, float(modulus), soft)
-    plant.RegisterCollisionGeometry(body, _rigid_transform(np.eye(4)), Mesh(str(soft_vtk)), "elastomer", soft)
-    properties = ProximityProperties()
-    if isinstance(other, str) and other.endswith(".vtk"):
-        AddCompliantHydroelasticProperties(1.0, float(other_modulus), properties)
-        other = Mesh(other)
-    elif isinstance(other, str):
-        AddRigidHydroelasticProperties(1.0, properties)
-        other = Mesh(other)
-    else:
-        AddRigidHydroelasticProperties(1.0, properties)
-    X_WO = np.eye(4) if X_WO is None else X_WO
-    plant.RegisterCollisionGeometry(plant.world_body(), _rigid_transform(X_WO), other, "other", properties)
-    plant.Finalize()
-    diagram = builder.Build()
-    context = diagram.CreateDefaultContext()
-    plant.SetFreeBodyPose(plant.GetMyContextFromRoot(context), body, _rigid_transform(np.eye(4) if X_WS is None else X_WS))
-    query = scene_graph.get_query_output_port().Eval(scene_graph.GetMyContextFromRoot(context))
-    surfaces = query.ComputeContactSurfaces(HydroelasticContactRepresentation.kPolygon)
-    inspector = query.inspector()
-    return [(surface, inspector.GetName(surface.id_M()) == "elastomer") for surface in surfaces]
+    def __init__(self, soft_vtk, modulus, other, X_WO=None, other_modulus=None):
+        from pydrake.geometry import (
+            AddCompliantHydroelasticProperties,
+            AddRigidHydroelasticProperties,
+            Mesh,
+            ProximityProperties,
+        )
+        from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+        from pydrake.multibody.tree import SpatialInertia
+        from pydrake.systems.framework import DiagramBuilder
+
+        builder = DiagramBuilder()
+        self.plant, self.scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+        self.body = self.plant.AddRigidBody("elastomer", SpatialInertia.SolidBoxWithMass(0.01, 0.01, 0.01, 0.01))
+        soft = ProximityProperties()
+        AddCompliantHydroelasticProperties(1.0, float(modulus), soft)
+        self.plant.RegisterCollisionGeometry(self.body, _rigid_transform(np.eye(4)), Mesh(str(soft_vtk)), "elastomer", soft)
+        properties = ProximityProperties()
+        if isinstance(other, str) and other.endswith(".vtk"):
+            AddCompliantHydroelasticProperties(1.0, float(other_modulus), properties)
+            other = Mesh(other)
+        elif isinstance(other, str):
+            AddRigidHydroelasticProperties(1.0, properties)
+            other = Mesh(other)
+        else:
+            AddRigidHydroelasticProperties(1.0, properties)
+        X_WO = np.eye(4) if X_WO is None else X_WO
+        self.plant.RegisterCollisionGeometry(self.plant.world_body(), _rigid_transform(X_WO), other, "other", properties)
+        self.plant.Finalize()
+        self.diagram = builder.Build()
+        self.context = self.diagram.CreateDefaultContext()
+        self.plant_context = self.plant.GetMyContextFromRoot(self.context)
+        self.scene_context = self.scene_graph.GetMyContextFromRoot(self.context)
+
+    def query(self, X_WS=None):
+        """[(ContactSurface, whether the soft body is Drake's M)] at soft-body pose X_WS."""
+        from pydrake.geometry import HydroelasticContactRepresentation
+
+        self.plant.SetFreeBodyPose(self.plant_context, self.body, _rigid_transform(np.eye(4) if X_WS is None else X_WS))
+        query = self.scene_graph.get_query_output_port().Eval(self.scene_context)
+        surfaces = query.ComputeContactSurfaces(HydroelasticContactRepresentation.kPolygon)
+        inspector = query.inspector()
+        return [(surface, inspector.GetName(surface.id_M()) == "elastomer") for surface in surfaces]
+
+
+def drake_contact_surfaces(soft_vtk, modulus, other, X_WS=None, X_WO=None, other_modulus=None):
+    """One query of a :class:`DrakeScene`: the soft mesh at X_WS, `other` at X_WO."""
+    return DrakeScene(soft_vtk, modulus, other, X_WO, other_modulus).query(X_WS)
 
 
 def integrate_drake_surface(surface, soft_is_M):
