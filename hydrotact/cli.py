@@ -60,6 +60,18 @@ def _parser() -> argparse.ArgumentParser:
     contact.add_argument("--json", action="store_true", help="print the report as JSON")
     contact.add_argument("--png", type=Path, metavar="CONTACT.png", help="render the contact surface over the sensor")
 
+    simulate = commands.add_parser("simulate", help="simulate a sensor along a probe trajectory; write a barometer log")
+    simulate.add_argument("--sensor", required=True, metavar="S", help="a built-in sensor (pad5x5, sphere8, ellipsoid8) or a sensor JSON file")
+    simulate.add_argument("--probe", required=True, metavar="SPEC", help="cylinder:d=2mm[,length=10mm], sphere:r=3mm or plane")
+    simulate.add_argument("--trajectory", required=True, type=Path, metavar="TRAJ.csv", help="CSV with columns time (s), x, y, z (probe tip, --units) and optionally rx, ry, rz (rad)")
+    simulate.add_argument("--units", default="m", choices=["m", "mm", "cm", "um"], help="length unit of the trajectory's x, y, z (default m)")
+    simulate.add_argument("--modulus", type=_length, default=1e6, metavar="E", help="hydroelastic modulus in Pa (default 1e6)")
+    simulate.add_argument("--field", default="laplace", choices=["laplace", "distance"], help="the sensor's strain field")
+    simulate.add_argument("--rays", type=int, default=64, metavar="N", help="rays per taxel receptive field (default 64)")
+    simulate.add_argument("-o", "--output", required=True, type=Path, metavar="LOG.parquet", help="the log to write (Parquet)")
+    simulate.add_argument("--png", type=Path, metavar="LOG.png", help="plot the simulated traces")
+    simulate.add_argument("--json", action="store_true", help="print the report as JSON")
+
     demo = commands.add_parser("demo", help="the built-in demonstration: writes results and pictures to out/")
     demo.add_argument("-o", "--output", type=Path, default=Path("out"), metavar="DIR")
     return parser
@@ -99,6 +111,16 @@ def _run(args) -> None:
         return
 
     from .mesh import calc_mesh_quality, write_mesh
+
+    if args.command == "simulate":
+        from ._simulate_job import run_simulate
+
+        report = run_simulate(
+            args.sensor, args.probe, args.trajectory, args.output, modulus=args.modulus, field=args.field,
+            num_rays=args.rays, units=args.units, png=args.png, progress=not args.json,
+        )
+        _print_report(f"simulated log of {report['sensor']}", report, args.json)
+        return
 
     if args.command == "contact":
         from ._contact_job import run_contact

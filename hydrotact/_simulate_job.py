@@ -1,0 +1,134 @@
+"""The `hydrotact simulate` job: a sensor, a probe and a trajectory file -> a barometer
+log (Parquet) and a plot of its traces.
+
+Long trajectories are simulated in blocks; each finished block is saved beside the
+output (`.LOG.partial.npz`, atomically), so an interrupted run resumes where it
+stopped when started again with the same inputs. The log itself is written atomically
+at the end, and the partial file removed.
+"""
+
+import dataclasses
+import json
+from pathlib import Path
+
+import jax
+import numpy as np
+
+from . import __version__
+from ._errors import HydrotactError
+from ._files import atomic_path, digest
+from .data import BarometerLog, write_log
+from .sim import calc_samples, compute_unit_responses, make_material, make_sensor_model, read_trajectory
+
+BLOCK = 512
+
+
+def _resume_key(*parts) -> str:
+    return digest(*(np.ascontiguousarray(p).tobytes() if isinstance(p, np.ndarray) else p for p in parts))
+
+
+def compute_responses_resumably(model, probe, trajectory, partial: Path, key: str, progress: bool = True):
+    """Unit responses along the trajectory, block by block, saved to `partial` after
+    each block; a matching `partial` from an interrupted run is picked up (host)."""
+    from tqdm.auto import tqdm
+
+    count = trajectory.num_samples
+    blocks = []
+    if partial.is_file():
+        with np.load(partial, allow_pickle=False) as saved:
+            if str(saved["key"]) == key:
+                blocks = [dict((name[len(f"{k}/"):], saved[name]) for name in saved.files if name.startswith(f"{k}/")) for k in range(int(saved["num_blocks"]))]
+    capacity = None
+    with tqdm(total=count, initial=min(count, len(blocks) * BLOCK), unit="sample", desc=f"simulating {model.name}", disable=not progress) as bar:
+        for start in range(len(blocks) * BLOCK, count, BLOCK):
+            stop = min(count, start + BLOCK)
+            poses = jax.tree_util.tree_map(lambda a: a[start:stop], trajectory.X_SR)
+            unit, capacity = compute_unit_responses(model, probe, poses, capacity)
+            blocks.append({field.name: np.asarray(getattr(unit, field.name)) for field in dataclasses.fields(unit)})
+            arrays = {f"{k}/{name}": value for k, block in enumerate(blocks) for name, value in block.items()}
+            with atomic_path(partial, suffix=".npz") as tmp:
+                np.savez(tmp, key=np.array(key), num_blocks=np.array(len(blocks)), **arrays)
+            bar.update(stop - start)
+    return {name: np.concatenate([block[name] for block in blocks]) for name in blocks[0]}
+
+
+def samples_to_log(spec, samples, trajectory_translations, rotation_vectors, metadata_extra: dict) -> BarometerLog:
+    """A BarometerLog (pressure 'elastic') from simulated samples."""
+    columns = {"time": np.asarray(samples.times, dtype=np.float64)}
+    for k, name in enumerate(spec.taxel_names):
+        columns[name] = np.asarray(samples.taxel_pressures[:, k])
+    for k, axis in enumerate("xyz"):
+        columns[f"probe_{axis}"] = trajectory_translations[:, k]
+    for k, axis in enumerate("xyz"):
+        columns[f"probe_r{axis}"] = rotation_vectors[:, k]
+    for k, axis in enumerate("xyz"):
+        columns[f"f{axis}"] = np.asarray(samples.force_S[:, k])
+    for k, axis in enumerate("xyz"):
+        columns[f"t{axis}"] = np.asarray(samples.torque_S[:, k])
+    columns["fn"] = np.asarray(samples.normal_force)
+    if spec.contact_center_S is not None:
+        columns["theta"] = np.asarray(samples.theta)
+        columns["phi"] = np.asarray(samples.phi)
+    columns["contact"] = np.asarray(samples.contact).astype(np.int8)
+    metadata = {
+        "format": "hydrotact.barometer_log",
+        "version": 1,
+        "sensor": spec.name,
+        "source": "simulated",
+        "pressure": "elastic",
+        "channels": list(spec.taxel_names),
+        "generator": f"hydrotact {__version__}",
+        **metadata_extra,
+    }
+    return BarometerLog(metadata=metadata, columns=columns)
+
+
+def run_simulate(sensor: str, probe_spec: str, trajectory_path, output, *, modulus=1e6, field="laplace", num_rays=64, units="m", png=None, progress=True) -> dict:
+    """Simulate the sensor along the trajectory file and write the log (and plot).
+    Returns a report dict."""
+    import jax.numpy as jnp
+
+    from ._contact_job import parse_probe
+    from .sensors import load_sensor
+    from .sim import Trajectory
+
+    output = Path(output)
+    if output.suffix.lower() != ".parquet":
+        raise HydrotactError(f"{output}: the log is written as Parquet; name it *.parquet")
+    material = make_material(modulus)
+    spec = load_sensor(sensor)
+    probe = parse_probe(probe_spec)
+    trajectory: Trajectory = read_trajectory(trajectory_path, units=units)
+    model = make_sensor_model(spec, field_kind=field, num_rays=num_rays)
+    translations = np.asarray(trajectory.X_SR.translation)
+    rotations = np.asarray(trajectory.rotation_vectors)
+    key = _resume_key(__version__, spec.name, json.dumps(spec.to_json(), sort_keys=True), probe_spec, field, num_rays, np.asarray(trajectory.times), translations, rotations)
+    partial = output.with_name(f".{output.name}.partial.npz")
+    unit = compute_responses_resumably(model, probe, trajectory, partial, key, progress)
+    from .sim import UnitResponse
+
+    unit = UnitResponse(**{name: jnp.asarray(value) for name, value in unit.items()})
+    samples = jax.tree_util.tree_map(np.asarray, calc_samples(model, material, trajectory.times, unit))
+    extra = {"probe": probe_spec, "material": {"modulus_Pa": float(modulus)}, "field": field, "num_rays": int(num_rays)}
+    steps = np.diff(np.asarray(trajectory.times))
+    if len(steps):
+        extra["rate_hz"] = float(1.0 / np.median(steps))
+    log = samples_to_log(spec, samples, translations, rotations, extra)
+    write_log(output, log)
+    partial.unlink(missing_ok=True)
+    if png is not None:
+        from .viz import plot_log
+
+        plot_log(log, png, title=f"{spec.name}: {probe_spec}, E = {modulus:g} Pa")
+    return {
+        "sensor": spec.name,
+        "probe": probe_spec,
+        "num_samples": trajectory.num_samples,
+        "num_taxels": spec.num_taxels,
+        "samples_in_contact": int(np.sum(samples.contact)),
+        "max_normal_force_N": float(np.max(samples.normal_force, initial=0.0)),
+        "max_taxel_pressure_Pa": float(np.max(samples.taxel_pressures, initial=0.0)),
+        "log": str(output),
+        **({"png": str(png)} if png is not None else {}),
+    }
+

@@ -1,0 +1,90 @@
+"""Probe trajectories: sample times and the probe's pose X_SR at each, checked."""
+
+import csv
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import HydrotactError, where
+from .._types import Array, Float
+from ..contact import Pose, make_pose
+from ..mesh._surface import UNIT_SCALES
+
+TRAJECTORY_COLUMNS = ("time", "x", "y", "z")
+ROTATION_COLUMNS = ("rx", "ry", "rz")
+
+
+class Trajectory(eqx.Module):
+    """A probe trajectory: at time `times[k]` (s) the probe frame R sits at pose
+    `X_SR[k]` in the sensor frame S (a batched Pose: rotation (T, 3, 3), translation
+    (T, 3) in metres), made from the rotation vectors `rotation_vectors` (T, 3), rad.
+    Built-in probes have their tip at R's origin."""
+
+    times: Float[Array, " num_samples"]
+    X_SR: Pose
+    rotation_vectors: Float[Array, "num_samples 3"]
+
+    @property
+    def num_samples(self) -> int:
+        return self.times.shape[0]
+
+
+def make_trajectory(times, translations, rotation_vectors=None, source: str | None = None) -> Trajectory:
+    """A checked Trajectory (host): finite values, strictly increasing times, one
+    translation (m) and optional rotation vector (rad) per time."""
+    times = np.asarray(times, dtype=np.float64)
+    translations = np.asarray(translations, dtype=np.float64)
+    if times.ndim != 1 or times.shape[0] == 0:
+        raise HydrotactError(f"{where(source)}a trajectory needs at least one sample time")
+    if translations.shape != (times.shape[0], 3):
+        raise HydrotactError(f"{where(source)}expected {times.shape[0]} probe positions (x, y, z), got shape {translations.shape}")
+    rotation_vectors = np.zeros_like(translations) if rotation_vectors is None else np.asarray(rotation_vectors, dtype=np.float64)
+    if rotation_vectors.shape != translations.shape:
+        raise HydrotactError(f"{where(source)}expected {times.shape[0]} rotation vectors, got shape {rotation_vectors.shape}")
+    for name, values in (("time", times), ("position", translations), ("rotation", rotation_vectors)):
+        bad = np.flatnonzero(~np.all(np.isfinite(values.reshape(len(times), -1)), axis=1))
+        if bad.size:
+            raise HydrotactError(f"{where(source)}row {bad[0] + 1}: {name} is not a finite number")
+    steps = np.diff(times)
+    if np.any(steps <= 0.0):
+        row = int(np.flatnonzero(steps <= 0.0)[0]) + 2
+        raise HydrotactError(f"{where(source)}row {row}: time {times[row - 1]:g} s does not increase (previous {times[row - 2]:g} s)")
+    X_SR = jax.vmap(make_pose)(jnp.asarray(translations), jnp.asarray(rotation_vectors))
+    return Trajectory(times=jnp.asarray(times), X_SR=X_SR, rotation_vectors=jnp.asarray(rotation_vectors))
+
+
+def read_trajectory(path, units: str = "m") -> Trajectory:
+    """A trajectory from a CSV file with a header row: columns `time` (s), `x`, `y`,
+    `z` (the probe tip in the sensor frame, in `units`) and optionally `rx`, `ry`,
+    `rz` (rotation vector, rad). Rows are numbered from 1 after the header."""
+    path = Path(path)
+    if units not in UNIT_SCALES:
+        raise HydrotactError(f"{path}: unknown length unit {units!r}; use one of {sorted(UNIT_SCALES)}")
+    if not path.is_file():
+        raise HydrotactError(f"{path}: no such trajectory file")
+    with path.open(newline="") as handle:
+        reader = csv.reader(handle)
+        header = [name.strip() for name in next(reader, [])]
+        rows = list(reader)
+    missing = [name for name in TRAJECTORY_COLUMNS if name not in header]
+    if missing:
+        raise HydrotactError(f"{path}: missing column(s) {', '.join(missing)} (has {', '.join(header) or 'no header'})")
+    rotations = [name for name in ROTATION_COLUMNS if name in header]
+    if rotations and len(rotations) != 3:
+        raise HydrotactError(f"{path}: give all of rx, ry, rz or none (has {', '.join(rotations)})")
+    wanted = list(TRAJECTORY_COLUMNS) + rotations
+    index = [header.index(name) for name in wanted]
+    values = np.empty((len(rows), len(wanted)))
+    for row_number, row in enumerate(rows, start=1):
+        if len(row) != len(header):
+            raise HydrotactError(f"{path}: row {row_number}: {len(row)} fields, expected {len(header)}")
+        for k, (name, column) in enumerate(zip(wanted, index)):
+            try:
+                values[row_number - 1, k] = float(row[column])
+            except ValueError:
+                raise HydrotactError(f"{path}: row {row_number}, column {name}: not a number: {row[column]!r}") from None
+    scale = UNIT_SCALES[units]
+    return make_trajectory(values[:, 0], values[:, 1:4] * scale, values[:, 4:7] if rotations else None, source=str(path))

@@ -1,0 +1,17 @@
+"""Taxels: what each barometer reads of a contact surface, by ray casting its
+receptive field (disk or cone) and aggregating the pressures hit."""
+
+from ._patterns import (
+    FIELD_KINDS as FIELD_KINDS,
+    TaxelLayout as TaxelLayout,
+    calc_spiral as calc_spiral,
+    calc_taxel_rays as calc_taxel_rays,
+    make_taxel_layout as make_taxel_layout,
+)
+from ._raycast import calc_surface_triangles as calc_surface_triangles, intersect_ray_triangle as intersect_ray_triangle
+from ._sample import (
+    TaxelReadings as TaxelReadings,
+    calc_taxel_pressures as calc_taxel_pressures,
+    grown_capacity as grown_capacity,
+    sample_taxels as sample_taxels,
+)

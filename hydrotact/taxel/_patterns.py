@@ -1,0 +1,129 @@
+"""Receptive fields and their ray patterns.
+
+A taxel (one barometer) sits at `position_S`, senses along the unit `axis_S`, and
+sees the contact surface through a receptive field sampled by `num_rays` rays:
+
+- a **disk** of radius r (flat arrays, as in the hydroelastic tactile paper): parallel
+  rays along the axis, starting from points of the disk of radius r about the
+  position, perpendicular to the axis; ray i's distance from the axis is d_i;
+- a **cone** of half-angle a (curved sensors): rays fanning from the position, ray i
+  at angle d_i from the axis.
+
+Rays are spread evenly and deterministically: a Vogel (golden-angle) spiral over the
+disk's area, and its spherical twin (uniform in solid angle) over the cone's cap, so
+each ray stands for the same area or solid angle whatever N is. Each ray carries the
+weight w_i = (r - d_i)^2 (r the radius, or the half-angle for a cone) of the paper's
+aggregation; because the rays are equal-area samples, sum w_i p_i / sum w_i converges
+to the weighted mean of the pressure over the field as N grows.
+"""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import HydrotactError
+from .._math import safe_norm
+from .._types import Array, Bool, Float
+
+GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))
+FIELD_KINDS = ("disk", "cone")
+
+
+class TaxelLayout(eqx.Module):
+    """Where the taxels are and what they see (a pytree; differentiable in every
+    float field, so layouts can be designed by gradient).
+
+    **Fields:**
+
+    - `positions_S`: (num_taxels, 3) barometer ports in the sensor frame S, metres.
+    - `axes_S`: (num_taxels, 3) sensing axes (normalised where used).
+    - `field_sizes`: (num_taxels,) disk radius in metres, or cone half-angle in radians.
+    - `is_cone`: (num_taxels,) True for a cone field, False for a disk.
+    """
+
+    positions_S: Float[Array, "num_taxels 3"]
+    axes_S: Float[Array, "num_taxels 3"]
+    field_sizes: Float[Array, " num_taxels"]
+    is_cone: Bool[Array, " num_taxels"]
+
+    @property
+    def num_taxels(self) -> int:
+        return self.positions_S.shape[0]
+
+
+def make_taxel_layout(positions_S, axes_S, field_kinds, field_sizes) -> TaxelLayout:
+    """A TaxelLayout from host arrays, checked: finite positions, non-zero axes,
+    kinds among "disk"/"cone", positive sizes, cone half-angles below 90 degrees."""
+    positions = np.asarray(positions_S, dtype=np.float64)
+    axes = np.array(axes_S, dtype=np.float64)
+    sizes = np.asarray(field_sizes, dtype=np.float64)
+    kinds = tuple(field_kinds)
+    count = positions.shape[0] if positions.ndim == 2 else -1
+    if positions.shape != (count, 3) or axes.shape != (count, 3) or sizes.shape != (count,) or len(kinds) != count:
+        raise HydrotactError(
+            f"taxel layout: positions {positions.shape}, axes {axes.shape}, sizes {sizes.shape} and "
+            f"{len(kinds)} field kinds do not describe the same number of taxels"
+        )
+    for index in range(count):
+        if kinds[index] not in FIELD_KINDS:
+            raise HydrotactError(f"taxel {index}: receptive field kind must be 'disk' or 'cone', got {kinds[index]!r}")
+        if not (np.all(np.isfinite(positions[index])) and np.all(np.isfinite(axes[index]))):
+            raise HydrotactError(f"taxel {index}: position and axis must be finite")
+        norm = np.linalg.norm(axes[index])
+        if norm == 0.0:
+            raise HydrotactError(f"taxel {index}: the axis is zero")
+        limit = np.pi / 2 if kinds[index] == "cone" else np.inf
+        if not (0.0 < sizes[index] < limit):
+            what = "half-angle (rad) must be in (0, pi/2)" if kinds[index] == "cone" else "radius (m) must be positive"
+            raise HydrotactError(f"taxel {index}: receptive field {what}, got {sizes[index]!r}")
+        axes[index] /= norm
+    return TaxelLayout(
+        positions_S=jnp.asarray(positions),
+        axes_S=jnp.asarray(axes),
+        field_sizes=jnp.asarray(sizes),
+        is_cone=jnp.asarray(np.array([kind == "cone" for kind in kinds], dtype=bool)),
+    )
+
+
+def calc_spiral(num_rays: int):
+    """The unit Vogel spiral: radii sqrt((i + 1/2) / N) and golden angles (host).
+
+    **Returns:** (fractions (N,) in (0, 1), the cumulative area fraction of each
+    ray's ring; azimuths (N,) in radians).
+    """
+    if num_rays < 1:
+        raise HydrotactError(f"a receptive field needs at least one ray, got {num_rays}")
+    index = np.arange(num_rays, dtype=np.float64)
+    return (index + 0.5) / num_rays, np.mod(index * GOLDEN_ANGLE, 2.0 * np.pi)
+
+
+def calc_perpendicular_frame(axis):
+    """Two unit vectors (u, v) with (u, v, axis) right-handed and orthonormal."""
+    axis = axis / safe_norm(axis)
+    helper = jnp.where(jnp.abs(axis[0]) < 0.9, jnp.array([1.0, 0.0, 0.0]), jnp.array([0.0, 1.0, 0.0])).astype(axis.dtype)
+    u = jnp.cross(helper, axis)
+    u = u / safe_norm(u)
+    return u, jnp.cross(axis, u)
+
+
+def calc_taxel_rays(position_S, axis_S, field_size, is_cone, num_rays: int):
+    """The rays of one taxel (pure; differentiable in position, axis and size).
+
+    **Returns:** (origins (N, 3), unit directions (N, 3), weights (N,) = (r - d_i)^2
+    with r the field size and d_i the ray's distance from the axis, or its angle).
+    """
+    fractions, azimuths = (jnp.asarray(a, position_S.dtype) for a in calc_spiral(num_rays))
+    axis = axis_S / safe_norm(axis_S)
+    u, v = calc_perpendicular_frame(axis)
+    around = jnp.cos(azimuths)[:, None] * u[None] + jnp.sin(azimuths)[:, None] * v[None]  # (N, 3)
+    # Disk: equal-area rings, d = r sqrt(f); rays parallel to the axis.
+    disk_offsets = field_size * jnp.sqrt(fractions)
+    disk_origins = position_S[None] + disk_offsets[:, None] * around
+    # Cone: equal-solid-angle rings, cos d = 1 - (1 - cos a) f; rays from the apex.
+    cos_angles = 1.0 - (1.0 - jnp.cos(field_size)) * fractions
+    cone_angles = jnp.arccos(jnp.clip(cos_angles, -1.0, 1.0))
+    cone_directions = jnp.cos(cone_angles)[:, None] * axis[None] + jnp.sin(cone_angles)[:, None] * around
+    origins = jnp.where(is_cone, jnp.broadcast_to(position_S[None], (num_rays, 3)), disk_origins)
+    directions = jnp.where(is_cone, cone_directions, jnp.broadcast_to(axis[None], (num_rays, 3)))
+    distances = jnp.where(is_cone, cone_angles, disk_offsets)
+    return origins, directions, (field_size - distances) ** 2

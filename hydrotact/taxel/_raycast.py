@@ -1,0 +1,64 @@
+"""Rays against triangles: the Moller-Trumbore test, and the contact surface as a
+triangle soup carrying pressure at its corners."""
+
+import jax.numpy as jnp
+
+from .._math import safe_div, safe_norm
+
+PARALLEL_TOLERANCE = 1e-12  # |sin| of the ray-to-plane angle below which a ray is parallel
+EDGE_TOLERANCE = 1e-9  # barycentric slack: a ray along a shared edge hits at least one side
+
+
+def intersect_ray_triangle(origin, direction, v0, v1, v2):
+    """Where a ray meets a triangle (Moller and Trumbore, 1997).
+
+    Solves origin + t direction = (1 - u - v) v0 + u v1 + v v2. Both faces count (a
+    contact surface is an open sheet, and rays reach it from either side); a ray
+    (nearly) parallel to the triangle's plane misses, and so does a degenerate
+    triangle. Points on edges and corners hit, with a barycentric slack of
+    EDGE_TOLERANCE: the plain test is not watertight, and a ray exactly along an edge
+    shared by two triangles (common: the Vogel spiral's first ray lies on the taxel's
+    x axis, the fan triangulations and the structured meshes have edges there) could
+    miss both by round-off. Such a ray hits both, at the same t to round-off, and the
+    caller takes the nearest. Only t > 0 counts. Values and gradients stay finite in
+    every case.
+
+    **Returns:** (hit, t, u, v); t is +inf where there is no hit.
+    """
+    e1, e2 = v1 - v0, v2 - v0
+    pvec = jnp.cross(direction, e2)
+    det = jnp.dot(e1, pvec)
+    # |det| = |d . (e1 x e2)|: compare with |d| |e1 x e2| to judge parallel rays.
+    scale = safe_norm(direction) * safe_norm(jnp.cross(e1, e2))
+    parallel = jnp.abs(det) <= PARALLEL_TOLERANCE * scale
+    inverse = safe_div(1.0, jnp.where(parallel, 0.0, det))
+    tvec = origin - v0
+    u = jnp.dot(tvec, pvec) * inverse
+    qvec = jnp.cross(tvec, e1)
+    v = jnp.dot(direction, qvec) * inverse
+    t = jnp.dot(e2, qvec) * inverse
+    slack = EDGE_TOLERANCE
+    hit = ~parallel & (u >= -slack) & (v >= -slack) & (u + v <= 1.0 + slack) & (t > 0.0)
+    return hit, jnp.where(hit, t, jnp.inf), u, v
+
+
+def calc_surface_triangles(surface):
+    """Fan-triangulate every polygon of a ContactSurface from its vertex 0.
+
+    Polygon k with c vertices gives triangles (0, j + 1, j + 2) for j < c - 2; the
+    slots are (capacity, 6) with a validity mask (the polygon is valid and j + 2 < c).
+
+    **Returns:** (corners (capacity * 6, 3, 3) in frame S, corner pressures
+    (capacity * 6, 3), valid (capacity * 6,)).
+    """
+    vertices, pressures = surface.vertices_S, surface.pressures
+    capacity, polygon_capacity = pressures.shape
+    fan = jnp.arange(1, polygon_capacity - 1)
+    corners = jnp.stack(
+        [jnp.broadcast_to(vertices[:, :1], (capacity, fan.shape[0], 3)), vertices[:, fan], vertices[:, fan + 1]], axis=2
+    )
+    corner_pressures = jnp.stack(
+        [jnp.broadcast_to(pressures[:, :1], (capacity, fan.shape[0])), pressures[:, fan], pressures[:, fan + 1]], axis=2
+    )
+    valid = surface.valid[:, None] & (fan[None, :] + 1 < surface.counts[:, None])
+    return corners.reshape(-1, 3, 3), corner_pressures.reshape(-1, 3), valid.reshape(-1)

@@ -1,0 +1,167 @@
+"""What each taxel reads: its rays cast at the contact surface, aggregated.
+
+Each ray takes the pressure at its first hit on the contact surface (barycentric
+interpolation of the polygon's linear pressure; several triangles hit at the same
+distance, as through a shared edge, are averaged); a ray that misses reads 0. The
+taxel reads p = sum_i w_i p_i / sum_i w_i over all its rays (misses included), with
+the receptive field's weights w_i = (r - d_i)^2.
+
+Two paths compute the same thing:
+
+- **culled** (default): each fan triangle's bounding sphere is tested against each
+  taxel's receptive volume (a half-cylinder for a disk, a cone for a cone); only the
+  (taxel, triangle) pairs that pass, compacted into a fixed-capacity buffer with an
+  overflow flag, are ray-cast, and the nearest hit of each ray is found by a segment
+  minimum over its taxel's pairs. Cost ~ pairs x rays.
+- **brute force**: every ray of every taxel against every triangle (the reference).
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import HydrotactError
+from .._math import safe_div, safe_norm
+from .._types import Array, Bool, Float, Int
+from ._patterns import TaxelLayout, calc_taxel_rays
+from ._raycast import calc_surface_triangles, intersect_ray_triangle
+
+MAX_PAIRS = 1 << 22
+
+
+class TaxelReadings(eqx.Module):
+    """Taxel values for one contact surface.
+
+    **Fields:**
+
+    - `pressures`: (num_taxels,) the weighted mean pressure over each receptive field,
+      Pa (in the units of the surface's pressure).
+    - `coverage`: (num_taxels,) the weight fraction of rays that hit, in [0, 1].
+    - `overflow`: True when the culled path had more candidate pairs than its buffer.
+    - `needed`: the number of candidate pairs it needed.
+    """
+
+    pressures: Float[Array, " num_taxels"]
+    coverage: Float[Array, " num_taxels"]
+    overflow: Bool[Array, ""]
+    needed: Int[Array, ""]
+
+
+def _meets_receptive_field(position, axis, size, is_cone, centres, radii):
+    """Whether spheres (centres (M, 3), radii (M,)) can meet a taxel's rays: a
+    conservative test against the half-cylinder (disk) or the cone (cone)."""
+    axis = axis / safe_norm(axis)
+    offsets = centres - position[None]
+    along = offsets @ axis
+    radial = safe_norm(offsets - along[:, None] * axis[None])
+    slack = 1e-9 * (size + radii) + 1e-12
+    disk = (radial <= size + radii + slack) & (along >= -radii - slack)
+    excess = jnp.arctan2(radial, along) - size  # angle outside the cone
+    reach = safe_norm(offsets)
+    distance = jnp.where(excess <= 0.0, 0.0, jnp.where(excess < 0.5 * jnp.pi, reach * jnp.sin(jnp.maximum(excess, 0.0)), reach))
+    cone = distance <= radii + slack
+    return jnp.where(is_cone, cone, disk)
+
+
+def _cast(origin, direction, triangle, pressures, is_valid):
+    """One ray against one triangle: (hit, distance t (+inf on a miss), pressure
+    interpolated at the hit (0 on a miss))."""
+    hit, t, u, v = intersect_ray_triangle(origin, direction, triangle[0], triangle[1], triangle[2])
+    hit = hit & is_valid
+    pressure = (1.0 - u - v) * pressures[0] + u * pressures[1] + v * pressures[2]
+    return hit, jnp.where(hit, t, jnp.inf), jnp.where(hit, pressure, 0.0)
+
+
+def _aggregate(ray_pressure_sums, ray_hit_counts, weights):
+    """Taxel value and coverage from per-ray sums of nearest-hit pressures and counts."""
+    ray_pressures = safe_div(ray_pressure_sums, ray_hit_counts)
+    total = jnp.sum(weights, axis=-1)
+    hit_weight = jnp.sum(jnp.where(ray_hit_counts > 0, weights, 0.0), axis=-1)
+    return safe_div(jnp.sum(weights * ray_pressures, axis=-1), total), safe_div(hit_weight, total)
+
+
+def calc_taxel_pressures(
+    layout: TaxelLayout, surface, num_rays: int = 64, capacity: int = 4096, brute_force: bool = False
+) -> TaxelReadings:
+    """Taxel readings of a contact surface (pure; jittable, vmappable, and
+    differentiable in the surface's vertices and pressures and in the layout).
+
+    **Arguments:**
+
+    - `layout`: the taxels (positions, axes, receptive fields), frame S.
+    - `surface`: a :class:`hydrotact.contact.ContactSurface` in frame S.
+    - `num_rays`: rays per receptive field (static).
+    - `capacity`: candidate (taxel, triangle) pairs of the culled path (static);
+      check `.overflow` or use :func:`sample_taxels`, which does.
+    - `brute_force`: every ray against every triangle (the reference; never overflows).
+    """
+    corners, corner_pressures, valid = calc_surface_triangles(surface)
+    origins, directions, weights = jax.vmap(calc_taxel_rays, in_axes=(0, 0, 0, 0, None))(
+        layout.positions_S, layout.axes_S, layout.field_sizes, layout.is_cone, num_rays
+    )
+    if brute_force:
+
+        def one_taxel(args):
+            rays_vs_triangles = jax.vmap(jax.vmap(_cast, in_axes=(None, None, 0, 0, 0)), in_axes=(0, 0, None, None, None))
+            hit, t, pressure = rays_vs_triangles(*args, corners, corner_pressures, valid)  # (num_rays, M)
+            nearest = hit & (t == jax.lax.stop_gradient(jnp.min(t, axis=1, keepdims=True)))
+            return jnp.sum(jnp.where(nearest, pressure, 0.0), axis=1), jnp.sum(nearest, axis=1)
+
+        sums, counts = jax.lax.map(one_taxel, (origins, directions))
+        pressures, coverage = _aggregate(sums, counts, weights)
+        return TaxelReadings(pressures, coverage, jnp.asarray(False), jnp.asarray(valid.shape[0] * layout.num_taxels))
+
+    num_taxels = layout.num_taxels
+    centres = jnp.mean(corners, axis=1)
+    radii = jnp.max(safe_norm(corners - centres[:, None], axis=-1), axis=1)
+    meets = jax.vmap(_meets_receptive_field, in_axes=(0, 0, 0, 0, None, None))(
+        layout.positions_S, layout.axes_S, layout.field_sizes, layout.is_cone, centres, radii
+    )
+    meets = jax.lax.stop_gradient(meets & valid[None, :])
+    (flat,) = jnp.nonzero(meets.reshape(-1), size=capacity, fill_value=-1)
+    pair_valid = flat >= 0
+    safe = jnp.maximum(flat, 0)
+    taxel_of_pair, triangle_of_pair = safe // corners.shape[0], safe % corners.shape[0]
+
+    pairs_vs_rays = jax.vmap(jax.vmap(_cast, in_axes=(0, 0, None, None, None)))
+    hit, t, pressure = pairs_vs_rays(
+        origins[taxel_of_pair], directions[taxel_of_pair], corners[triangle_of_pair], corner_pressures[triangle_of_pair], pair_valid
+    )  # each (capacity, num_rays)
+    nearest_t = jax.ops.segment_min(jax.lax.stop_gradient(t), taxel_of_pair, num_segments=num_taxels)
+    nearest = hit & (t == nearest_t[taxel_of_pair])
+    sums = jax.ops.segment_sum(jnp.where(nearest, pressure, 0.0), taxel_of_pair, num_segments=num_taxels)
+    counts = jax.ops.segment_sum(nearest.astype(jnp.int32), taxel_of_pair, num_segments=num_taxels)
+    pressures, coverage = _aggregate(sums, counts, weights)
+    needed = jnp.sum(meets)
+    return TaxelReadings(pressures, coverage, needed > capacity, needed)
+
+
+def grown_capacity(capacity: int, needed) -> int:
+    """The next power-of-two multiple of `capacity` that holds `needed` pairs (host),
+    or a clear error past MAX_PAIRS."""
+    needed = int(np.max(np.asarray(needed)))
+    if needed > MAX_PAIRS:
+        raise HydrotactError(f"taxel sampling needs more than {MAX_PAIRS} candidate (taxel, triangle) pairs ({needed})")
+    while capacity < needed:
+        capacity *= 2
+    return capacity
+
+
+_readings = eqx.filter_jit(calc_taxel_pressures)
+_batched_readings = eqx.filter_jit(eqx.filter_vmap(calc_taxel_pressures, in_axes=(None, 0, None, None)))
+
+
+def sample_taxels(layout: TaxelLayout, surface, num_rays: int = 64, capacity: int = 4096) -> tuple[TaxelReadings, int]:
+    """Taxel readings of one surface or a batch (a surface with a leading axis),
+    growing the pair buffer until nothing overflows (host).
+
+    **Returns:** (readings, the capacity that sufficed).
+    """
+    batched = surface.counts.ndim == 2
+    run = _batched_readings if batched else _readings
+    while True:
+        readings = run(layout, surface, num_rays, capacity)
+        if not bool(np.any(np.asarray(readings.overflow))):
+            return readings, capacity
+        capacity = grown_capacity(capacity, readings.needed)
