@@ -27,20 +27,33 @@ def _resume_key(*parts) -> str:
     return digest(*(np.ascontiguousarray(p).tobytes() if isinstance(p, np.ndarray) else p for p in parts))
 
 
+def _load_partial(partial: Path, key: str) -> list:
+    """The blocks saved in `partial` if it was written for `key`; [] if it is absent,
+    of other inputs, or unreadable (it is only a cache: recompute rather than fail)."""
+    import zipfile
+
+    if not partial.is_file():
+        return []
+    try:
+        with partial.open("rb") as handle, np.load(handle, allow_pickle=False) as saved:  # our handle: np.load leaks its own on a bad zip
+            if str(saved["key"]) != key:
+                return []
+            return [dict((name[len(f"{k}/"):], saved[name]) for name in saved.files if name.startswith(f"{k}/")) for k in range(int(saved["num_blocks"]))]
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        return []
+
+
 def compute_responses_resumably(model, probe, trajectory, partial: Path, key: str, progress: bool = True):
     """Unit responses along the trajectory, block by block, saved to `partial` after
     each block; a matching `partial` from an interrupted run is picked up (host)."""
     from tqdm.auto import tqdm
 
     count = trajectory.num_samples
-    blocks = []
-    if partial.is_file():
-        with np.load(partial, allow_pickle=False) as saved:
-            if str(saved["key"]) == key:
-                blocks = [dict((name[len(f"{k}/"):], saved[name]) for name in saved.files if name.startswith(f"{k}/")) for k in range(int(saved["num_blocks"]))]
+    blocks = _load_partial(partial, key)
+    done = sum(len(block["area"]) for block in blocks)  # not len(blocks) * BLOCK: the blocks may have been saved with another BLOCK
     capacity = None
-    with tqdm(total=count, initial=min(count, len(blocks) * BLOCK), unit="sample", desc=f"simulating {model.name}", disable=not progress) as bar:
-        for start in range(len(blocks) * BLOCK, count, BLOCK):
+    with tqdm(total=count, initial=min(count, done), unit="sample", desc=f"simulating {model.name}", disable=not progress) as bar:
+        for start in range(done, count, BLOCK):
             stop = min(count, start + BLOCK)
             poses = jax.tree_util.tree_map(lambda a: a[start:stop], trajectory.X_SR)
             unit, capacity = compute_unit_responses(model, probe, poses, capacity)

@@ -67,7 +67,7 @@ def check_log(log: BarometerLog, source: str) -> None:
         values = np.asarray(values)
         if values.ndim != 1 or len(values) != length:
             raise HydrotactError(f"{source}: column {name!r} has {values.shape} values, expected {length}")
-        if not np.issubdtype(values.dtype, np.number) and values.dtype != bool:
+        if not (np.issubdtype(values.dtype, np.integer) or np.issubdtype(values.dtype, np.floating) or values.dtype == bool):
             raise HydrotactError(f"{source}: column {name!r} is not numeric ({values.dtype})")
         bad = ~np.isfinite(values.astype(np.float64))
         if known.get(name, {}).get("nan_allowed"):

@@ -59,16 +59,20 @@ def make_trajectory(times, translations, rotation_vectors=None, source: str | No
 def read_trajectory(path, units: str = "m") -> Trajectory:
     """A trajectory from a CSV file with a header row: columns `time` (s), `x`, `y`,
     `z` (the probe tip in the sensor frame, in `units`) and optionally `rx`, `ry`,
-    `rz` (rotation vector, rad). Rows are numbered from 1 after the header."""
+    `rz` (rotation vector, rad), in any order. Rows are numbered from 1 after the
+    header; blank lines are skipped (but counted)."""
     path = Path(path)
     if units not in UNIT_SCALES:
         raise HydrotactError(f"{path}: unknown length unit {units!r}; use one of {sorted(UNIT_SCALES)}")
     if not path.is_file():
         raise HydrotactError(f"{path}: no such trajectory file")
-    with path.open(newline="") as handle:
-        reader = csv.reader(handle)
-        header = [name.strip() for name in next(reader, [])]
-        rows = list(reader)
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as handle:  # -sig: a byte-order mark (Excel) is no part of the header
+            reader = csv.reader(handle)
+            header = [name.strip() for name in next(reader, [])]
+            rows = list(reader)
+    except (UnicodeDecodeError, csv.Error) as error:
+        raise HydrotactError(f"{path}: not a CSV text file ({error})") from None
     missing = [name for name in TRAJECTORY_COLUMNS if name not in header]
     if missing:
         raise HydrotactError(f"{path}: missing column(s) {', '.join(missing)} (has {', '.join(header) or 'no header'})")
@@ -77,14 +81,21 @@ def read_trajectory(path, units: str = "m") -> Trajectory:
         raise HydrotactError(f"{path}: give all of rx, ry, rz or none (has {', '.join(rotations)})")
     wanted = list(TRAJECTORY_COLUMNS) + rotations
     index = [header.index(name) for name in wanted]
-    values = np.empty((len(rows), len(wanted)))
-    for row_number, row in enumerate(rows, start=1):
+    numbered = [(number, row) for number, row in enumerate(rows, start=1) if any(field.strip() for field in row)]  # skip blank lines; rows keep their numbers
+    values = np.empty((len(numbered), len(wanted)))
+    for k, (row_number, row) in enumerate(numbered):
         if len(row) != len(header):
             raise HydrotactError(f"{path}: row {row_number}: {len(row)} fields, expected {len(header)}")
-        for k, (name, column) in enumerate(zip(wanted, index)):
+        for j, (name, column) in enumerate(zip(wanted, index)):
             try:
-                values[row_number - 1, k] = float(row[column])
+                values[k, j] = float(row[column])
             except ValueError:
                 raise HydrotactError(f"{path}: row {row_number}, column {name}: not a number: {row[column]!r}") from None
+            if not np.isfinite(values[k, j]):
+                raise HydrotactError(f"{path}: row {row_number}, column {name}: {row[column].strip()} is not a finite number")
+    back = np.flatnonzero(np.diff(values[:, 0]) <= 0.0)
+    if back.size:
+        k = int(back[0]) + 1
+        raise HydrotactError(f"{path}: row {numbered[k][0]}, column time: time {values[k, 0]:g} s does not increase (previous {values[k - 1, 0]:g} s)")
     scale = UNIT_SCALES[units]
     return make_trajectory(values[:, 0], values[:, 1:4] * scale, values[:, 4:7] if rotations else None, source=str(path))
