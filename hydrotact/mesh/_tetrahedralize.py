@@ -1,5 +1,7 @@
 """Tetrahedral meshes of closed surfaces with fTetWild (pytetwild), cached by input."""
 
+import contextlib
+import tempfile
 from importlib.metadata import version
 
 import numpy as np
@@ -49,13 +51,16 @@ def _run_tetwild(vertices, faces, edge_length, epsilon, use_cache):
     if use_cache and path.is_file():
         with np.load(path) as data:
             return data["vertices"], data["tets"]
-    tet_vertices, tets = pytetwild.tetrahedralize(
-        np.asarray(vertices, dtype=np.float64),
-        np.asarray(faces, dtype=np.int32),
-        edge_length_abs=float(edge_length),
-        epsilon=float(epsilon),
-        quiet=True,
-    )
+    # fTetWild writes a scratch file (__tracked_surface.stl) into the working
+    # directory: run it in a temporary one so users' folders stay clean.
+    with tempfile.TemporaryDirectory(prefix="hydrotact-tetwild-") as scratch, contextlib.chdir(scratch):
+        tet_vertices, tets = pytetwild.tetrahedralize(
+            np.asarray(vertices, dtype=np.float64),
+            np.asarray(faces, dtype=np.int32),
+            edge_length_abs=float(edge_length),
+            epsilon=float(epsilon),
+            quiet=True,
+        )
     if use_cache:
         with atomic_path(path) as tmp:
             np.savez_compressed(tmp, vertices=tet_vertices, tets=tets)
