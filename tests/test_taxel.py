@@ -1,0 +1,336 @@
+"""Taxels: ray-triangle intersection against hand-computed cases, culled vs brute-force
+sampling, exactness under uniform pressure, convergence in the number of rays, and
+gradients against finite differences."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from hydrotact._errors import HydrotactError
+from hydrotact.contact import (
+    ContactSurface,
+    HalfSpace,
+    calc_polygon_integrals,
+    compute_contact_surface,
+    make_cylinder_probe,
+    make_pose,
+    make_sphere_probe,
+)
+from hydrotact.sim import SimCapacity, calc_unit_response, make_sensor_model
+from hydrotact.taxel import (
+    calc_spiral,
+    calc_taxel_pressures,
+    calc_taxel_rays,
+    intersect_ray_triangle,
+    make_taxel_layout,
+    sample_taxels,
+)
+
+from helpers import central_difference
+
+PAD_TOP = 4e-3
+TRIANGLE = jnp.array([[0.0, 0.0, 1.0], [2.0, 0.0, 1.0], [0.0, 2.0, 1.0]])
+UP = jnp.array([0.0, 0.0, 1.0])
+
+
+def _intersect(origin, direction=UP, triangle=TRIANGLE):
+    hit, t, u, v = intersect_ray_triangle(jnp.asarray(origin, float), jnp.asarray(direction, float), *triangle)
+    return bool(hit), float(t), float(u), float(v)
+
+
+# --- ray against triangle ------------------------------------------------------------
+
+
+def test_ray_hits_inside_with_hand_computed_distance_and_barycentrics():
+    hit, t, u, v = _intersect([0.5, 0.25, -2.0])
+    assert hit
+    assert t == pytest.approx(3.0, abs=1e-15)
+    assert (u, v) == pytest.approx((0.25, 0.125), abs=1e-15)  # p = u v1 + v v2 from v0 = 0
+
+
+def test_oblique_ray_distance():
+    direction = np.array([1.0, 0.0, 1.0]) / np.sqrt(2.0)
+    hit, t, u, v = _intersect([0.0, 0.5, 0.0], direction)
+    assert hit and t == pytest.approx(np.sqrt(2.0), abs=1e-14)
+    assert (u, v) == pytest.approx((0.5, 0.25), abs=1e-14)
+
+
+@pytest.mark.parametrize(
+    "origin",
+    [[1.5, 1.5, 0.0], [-0.1, 0.5, 0.0], [0.5, -0.1, 0.0], [3.0, 0.0, 0.0]],
+    ids=["beyond the hypotenuse", "left of the y edge", "below the x edge", "beyond a corner"],
+)
+def test_ray_misses_outside(origin):
+    hit, t, _, _ = _intersect(origin)
+    assert not hit and t == np.inf
+
+
+@pytest.mark.parametrize(
+    "origin", [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 0.0], [2.0, 0.0, 0.0]], ids=["edge x", "edge y", "hypotenuse", "corner 0", "corner 1"]
+)
+def test_edges_and_corners_hit(origin):
+    hit, t, _, _ = _intersect(origin)
+    assert hit and t == pytest.approx(1.0)
+
+
+def test_parallel_ray_misses_even_in_the_plane():
+    assert not _intersect([0.5, 0.5, 1.0], [1.0, 0.0, 0.0])[0]
+    assert not _intersect([0.5, 0.5, 0.0], [0.0, 1.0, 0.0])[0]
+
+
+def test_back_face_hits_and_behind_the_origin_misses():
+    reversed_triangle = TRIANGLE[jnp.array([0, 2, 1])]
+    assert _intersect([0.5, 0.5, 0.0], UP, reversed_triangle)[0]  # two-sided
+    assert _intersect([0.5, 0.5, 2.0], -UP)[0]  # from above, going down
+    assert not _intersect([0.5, 0.5, 2.0], UP)[0]  # triangle behind the ray
+
+
+def test_degenerate_triangle_misses_with_finite_gradient():
+    flat = jnp.array([[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [2.0, 0.0, 1.0]])
+    assert not _intersect([0.5, 0.0, 0.0], UP, flat)[0]
+
+    def f(z):
+        hit, t, u, v = intersect_ray_triangle(jnp.array([0.5, 0.0, z]), UP, *flat)
+        return jnp.where(hit, t + u + v, 0.0)
+
+    assert np.isfinite(float(jax.grad(f)(0.0)))
+
+
+def test_shared_edge_is_watertight():
+    """A ray exactly along the diagonal shared by two triangles hits one of them, for
+    many positions along it (the plain test can miss both by round-off)."""
+    square = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [1.0, 1.0, 1.0], [0.0, 1.0, 1.0]]) * 3.1e-4
+    lower, upper = jnp.asarray(square[[0, 1, 2]]), jnp.asarray(square[[0, 2, 3]])
+    for s in np.linspace(0.01, 0.99, 97) * 3.1e-4:
+        origin = jnp.array([s, s, 0.0])
+        assert bool(intersect_ray_triangle(origin, UP, *lower)[0]) or bool(intersect_ray_triangle(origin, UP, *upper)[0])
+
+
+# --- receptive fields ----------------------------------------------------------------
+
+
+def test_ray_patterns_cover_the_field_evenly():
+    fractions, azimuths = calc_spiral(200)
+    assert np.all((fractions > 0) & (fractions < 1)) and np.all((azimuths >= 0) & (azimuths < 2 * np.pi))
+    position, axis = jnp.array([1e-3, -2e-3, 0.5e-3]), jnp.array([0.0, 0.6, 0.8])
+    origins, directions, weights = calc_taxel_rays(position, axis, 1.1e-3, False, 200)
+    offsets = origins - position[None]
+    np.testing.assert_allclose(offsets @ axis, 0.0, atol=1e-18)  # in the disk's plane
+    assert np.max(np.linalg.norm(offsets, axis=1)) < 1.1e-3
+    np.testing.assert_allclose(directions, np.broadcast_to(axis, directions.shape))
+    # equal-area samples: the mean of |offset|^2 is r^2 / 2, as for a uniform disk
+    assert np.mean(np.sum(np.asarray(offsets) ** 2, axis=1)) == pytest.approx(0.5 * 1.1e-3**2, rel=1e-3)
+    origins, directions, weights = calc_taxel_rays(position, axis, np.radians(40.0), True, 200)
+    angles = np.arccos(np.clip(np.asarray(directions) @ np.asarray(axis), -1, 1))
+    assert np.all(angles < np.radians(40.0)) and np.all(np.asarray(weights) > 0)
+    np.testing.assert_allclose(origins, np.broadcast_to(position, origins.shape))
+    # equal solid angle: mean of cos(angle) is that of a uniform cap, (1 + cos a) / 2
+    assert np.mean(np.cos(angles)) == pytest.approx(0.5 * (1 + np.cos(np.radians(40.0))), rel=1e-6)
+
+
+def test_bad_layouts_are_refused():
+    with pytest.raises(HydrotactError, match="taxel 0: the axis is zero"):
+        make_taxel_layout([[0, 0, 0]], [[0, 0, 0]], ["disk"], [1e-3])
+    with pytest.raises(HydrotactError, match="half-angle"):
+        make_taxel_layout([[0, 0, 0]], [[0, 0, 1]], ["cone"], [2.0])
+    with pytest.raises(HydrotactError, match="'disk' or 'cone'"):
+        make_taxel_layout([[0, 0, 0]], [[0, 0, 1]], ["ring"], [1e-3])
+    with pytest.raises(HydrotactError, match="same number of taxels"):
+        make_taxel_layout([[0, 0, 0]], [[0, 0, 1], [0, 0, 1]], ["disk"], [1e-3])
+
+
+# --- sampling ------------------------------------------------------------------------
+
+
+def make_plane_surface(height, pressure, half_size=8e-3, cells=5, capacity=40) -> ContactSurface:
+    """A square of side 2 half_size at z = height, cut into cells x cells quadrilateral
+    polygons (so rays meet shared edges), each at uniform `pressure`."""
+    edges = np.linspace(-half_size, half_size, cells + 1)
+    vertices = np.zeros((capacity, 8, 3))
+    counts = np.zeros(capacity, dtype=np.int32)
+    k = 0
+    for i in range(cells):
+        for j in range(cells):
+            x0, x1, y0, y1 = edges[i], edges[i + 1], edges[j], edges[j + 1]
+            # counter-clockwise about the normal -z
+            vertices[k, :4] = [[x0, y0, height], [x0, y1, height], [x1, y1, height], [x1, y0, height]]
+            counts[k] = 4
+            k += 1
+    pressures = np.where(np.arange(8)[None] < counts[:, None], pressure, 0.0)
+    normal = jnp.array([0.0, 0.0, -1.0])
+    integrals = jax.vmap(calc_polygon_integrals, in_axes=(0, 0, 0, None))(jnp.asarray(vertices), jnp.asarray(counts), jnp.asarray(pressures), normal)
+    valid = counts >= 3
+    return ContactSurface(
+        vertices_S=jnp.asarray(vertices),
+        pressures=jnp.asarray(pressures),
+        counts=jnp.asarray(counts),
+        normals_S=jnp.broadcast_to(normal, (capacity, 3)),
+        valid=jnp.asarray(valid),
+        areas=integrals[0],
+        pressure_integrals=integrals[1],
+        first_moments_S=integrals[2],
+        pressure_moments_S=integrals[3],
+        tet_index=jnp.where(jnp.asarray(valid), 0, -1),
+        other_index=jnp.full(capacity, -1),
+        overflow=jnp.asarray(False),
+        needed=jnp.array([0, 0, k]),
+    )
+
+
+def _mixed_layout():
+    """Disks on the PCB and tilted cones, all looking up at the plane z = 4 mm."""
+    positions = [[0.0, 0.0, 0.0], [2.2e-3, 0.0, 0.0], [-3e-3, 1e-3, 1e-3], [1e-3, 2e-3, 0.5e-3]]
+    axes = [[0, 0, 1], [0, 0, 1], [0.3, 0.1, 1.0], [-0.5, 0.0, 1.0]]
+    return make_taxel_layout(positions, axes, ["disk", "disk", "cone", "cone"], [1.1e-3, 0.7e-3, np.radians(40), np.radians(25)])
+
+
+@pytest.mark.parametrize("num_rays", [1, 7, 64, 257])
+def test_uniform_pressure_reads_exactly_that_pressure(num_rays):
+    surface = make_plane_surface(PAD_TOP, 12345.0)
+    readings, _ = sample_taxels(_mixed_layout(), surface, num_rays)
+    np.testing.assert_allclose(readings.pressures, 12345.0, rtol=1e-13)
+    np.testing.assert_allclose(readings.coverage, 1.0, rtol=1e-13)
+
+
+@pytest.fixture(scope="module")
+def pad_model():
+    return make_sensor_model("pad5x5")
+
+
+@pytest.fixture(scope="module")
+def sphere_model():
+    return make_sensor_model("sphere8")
+
+
+def _pad_surface(model, probe, x, y, depth):
+    surface, _ = compute_contact_surface(model.field, probe, make_pose([x, y, PAD_TOP - depth]), clusters=model.clusters)
+    return surface
+
+
+def test_culled_equals_brute_force_on_the_pad(pad_model):
+    surface = _pad_surface(pad_model, make_cylinder_probe(2e-3), 1.3e-3, 0.4e-3, 0.45e-3)
+    culled, capacity = sample_taxels(pad_model.layout, surface, 64)
+    brute = jax.jit(lambda s: calc_taxel_pressures(pad_model.layout, s, 64, brute_force=True))(surface)
+    assert np.count_nonzero(np.asarray(culled.pressures)) >= 2
+    np.testing.assert_allclose(culled.pressures, brute.pressures, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(culled.coverage, brute.coverage, rtol=1e-12, atol=1e-15)
+
+
+def test_culled_equals_brute_force_with_cones(sphere_model):
+    surface, _ = compute_contact_surface(sphere_model.field, HalfSpace(), make_pose([0.0, 0.0, 14e-3]), clusters=sphere_model.clusters)
+    culled, _ = sample_taxels(sphere_model.layout, surface, 32)
+    brute = jax.jit(lambda s: calc_taxel_pressures(sphere_model.layout, s, 32, brute_force=True))(surface)
+    assert np.count_nonzero(np.asarray(culled.pressures)) >= 3
+    np.testing.assert_allclose(culled.pressures, brute.pressures, rtol=1e-12, atol=1e-18)
+
+
+def test_overflow_is_flagged_and_grown_away(pad_model):
+    surface = _pad_surface(pad_model, make_cylinder_probe(2e-3), 0.0, 0.0, 0.45e-3)
+    small = calc_taxel_pressures(pad_model.layout, surface, 16, capacity=8)
+    assert bool(small.overflow) and int(small.needed) > 8
+    grown, capacity = sample_taxels(pad_model.layout, surface, 16, capacity=8)
+    reference, _ = sample_taxels(pad_model.layout, surface, 16, capacity=1 << 16)
+    assert not bool(grown.overflow) and capacity >= int(small.needed)
+    np.testing.assert_allclose(grown.pressures, reference.pressures, rtol=1e-14)
+
+
+def test_empty_contact_reads_zero_with_finite_gradients(pad_model):
+    probe = make_sphere_probe(2e-3)
+
+    def first_taxel(z):
+        return calc_unit_response(pad_model, probe, make_pose(jnp.array([0.0, 0.0, z]))).taxel_pressures[12]
+
+    assert float(first_taxel(PAD_TOP + 1e-3)) == 0.0
+    assert float(jax.grad(first_taxel)(PAD_TOP + 1e-3)) == 0.0
+    assert np.isfinite(float(jax.grad(first_taxel)(PAD_TOP)))  # grazing
+
+
+def test_batched_sampling_matches_one_by_one(pad_model):
+    probe = make_cylinder_probe(2e-3)
+    poses = jax.vmap(make_pose)(jnp.array([[x, 0.0, PAD_TOP - 0.4e-3] for x in (-1e-3, 0.0, 1.7e-3)]))
+    surfaces, capacity = compute_contact_surface(pad_model.field, probe, poses, clusters=pad_model.clusters)
+    batched, _ = sample_taxels(pad_model.layout, surfaces, 32)
+    for k in range(3):
+        one = jax.tree_util.tree_map(lambda a: a[k], surfaces)
+        single, _ = sample_taxels(pad_model.layout, one, 32)
+        np.testing.assert_allclose(batched.pressures[k], single.pressures, rtol=1e-13, atol=1e-12)
+
+
+@pytest.mark.parametrize("case", ["pad, 3 mm sphere", "pad, 6 mm sphere off-centre", "sphere8, half-space"])
+def test_taxel_values_converge_in_the_number_of_rays(case, pad_model, sphere_model):
+    """The value for a fixed contact changes by < 1% between N = 64 and N = 256 (for
+    contacts whose pressure falls to zero at their rim; see the cylinder test)."""
+    if case.startswith("sphere8"):
+        model = sphere_model
+        surface, _ = compute_contact_surface(model.field, HalfSpace(), make_pose([0.0, 0.0, 13.5e-3]), clusters=model.clusters)
+    else:
+        model = pad_model
+        radius, x = (3e-3, 0.3e-3) if "3 mm" in case else (6e-3, 1.4e-3)
+        surface = _pad_surface(model, make_sphere_probe(radius), x, 0.2e-3, 0.45e-3)
+    coarse, _ = sample_taxels(model.layout, surface, 64)
+    fine, _ = sample_taxels(model.layout, surface, 256)
+    coarse, fine = np.asarray(coarse.pressures), np.asarray(fine.pressures)
+    strong = fine > 0.2 * fine.max()  # taxels that see the contact well
+    assert strong.sum() >= 1
+    np.testing.assert_array_less(np.abs(coarse[strong] - fine[strong]) / fine[strong], 0.01)
+
+
+def test_sharp_rim_converges_more_slowly_but_converges(pad_model):
+    """A flat-ended cylinder's pressure jumps to zero at its rim, so point sampling of
+    the receptive field converges like N^-3/4 rather than smoothly: the error (as a
+    fraction of the peak, over positions where the rim crosses the field) must still
+    fall by at least 2x per 4x rays."""
+    probe = make_cylinder_probe(2e-3)
+    xs = np.linspace(0.5e-3, 1.6e-3, 8)
+    poses = jax.vmap(make_pose)(jnp.array([[x, 0.2e-3, PAD_TOP - 0.45e-3] for x in xs]))
+    surfaces, _ = compute_contact_surface(pad_model.field, probe, poses, clusters=pad_model.clusters)
+
+    def centre_taxel(num_rays):
+        run = jax.jit(lambda ss: jax.lax.map(lambda s: calc_taxel_pressures(pad_model.layout, s, num_rays, 4096).pressures[12], ss))
+        return np.asarray(run(surfaces))
+
+    values = {n: centre_taxel(n) for n in (64, 256, 2048)}
+    peak = values[2048].max()
+    errors = {n: np.max(np.abs(values[n] - values[2048])) / peak for n in (64, 256)}
+    assert errors[256] < 0.5 * errors[64], errors
+    assert errors[256] < 0.04, errors
+
+
+# --- gradients -----------------------------------------------------------------------
+
+
+def test_gradients_match_finite_differences(pad_model):
+    """d(taxel value)/d(probe translation, rotation, E, taxel position) against central
+    differences, on the pad pressed by a sphere (a smooth contact)."""
+    probe = make_sphere_probe(3e-3)
+    base = np.array([0.7e-3, 0.3e-3, PAD_TOP - 0.5e-3])
+    rotation = np.array([0.02, -0.01, 0.0])
+    _, contact_capacity = compute_contact_surface(pad_model.field, probe, make_pose(base, rotation), clusters=pad_model.clusters)
+    capacity = SimCapacity(contact=contact_capacity, taxel_pairs=1 << 14)
+
+    def reading(model, translation, rotation_vector, modulus, positions):
+        model = eqx.tree_at(lambda m: m.layout.positions_S, model, positions)
+        response = calc_unit_response(model, probe, make_pose(translation, rotation_vector), capacity)
+        return modulus * response.taxel_pressures[12], response.overflow
+
+    f = eqx.filter_jit(lambda *a: reading(*a)[0])
+    grad = eqx.filter_jit(jax.grad(lambda *a: reading(*a)[0], argnums=(1, 2, 3, 4)))
+    args = (pad_model, jnp.asarray(base), jnp.asarray(rotation), jnp.asarray(2e5), pad_model.layout.positions_S)
+    value, overflow = eqx.filter_jit(reading)(*args)
+    assert not bool(overflow) and float(value) > 1e3
+    grads = grad(*args)
+    for axis in range(3):
+        direction = np.eye(3)[axis]
+        fd = central_difference(lambda x: f(pad_model, x, *args[2:]), base, direction, 1e-8)
+        assert float(grads[0][axis]) == pytest.approx(fd, rel=2e-4, abs=1e2), ("translation", axis)
+        fd = central_difference(lambda w: f(pad_model, args[1], w, *args[3:]), rotation, direction, 1e-6)
+        assert float(grads[1][axis]) == pytest.approx(fd, rel=2e-4, abs=1e0), ("rotation", axis)
+    fd = central_difference(lambda e: f(pad_model, args[1], args[2], e, args[4]), 2e5, 1.0, 10.0)
+    assert float(grads[2]) == pytest.approx(fd, rel=1e-8)
+    direction = np.zeros((25, 3))
+    direction[12, 0] = 1.0
+    fd = central_difference(lambda p: f(*args[:4], p), np.asarray(pad_model.layout.positions_S), direction, 1e-8)
+    assert abs(fd) > 1e3  # the taxel's position matters here: the check can fail
+    assert float(grads[3][12, 0]) == pytest.approx(fd, rel=2e-4, abs=1e2)
