@@ -1,0 +1,43 @@
+"""The notebooks and the experiments run, at smoke size, as a user would run them."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).parents[1]
+NOTEBOOKS = sorted((ROOT / "notebooks").glob("[0-9]*.py"))
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
+def test_notebook_executes(path, tmp_path, monkeypatch):
+    jupytext = pytest.importorskip("jupytext")
+    nbclient = pytest.importorskip("nbclient")
+    monkeypatch.setenv("HYDROTACT_SMOKE", "1")
+    monkeypatch.setenv("HYDROTACT_NOTEBOOK_OUT", str(tmp_path / "out"))
+    notebook = jupytext.read(path)
+    client = nbclient.NotebookClient(notebook, timeout=900, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}})
+    client.execute()
+    outputs = [output for cell in notebook.cells if cell.cell_type == "code" for output in cell.get("outputs", [])]
+    assert not [o for o in outputs if o.get("output_type") == "error"]
+    images = [o for o in outputs if "image/png" in o.get("data", {})]
+    assert len(images) >= 3, "the notebook should show its renders and plots"
+
+
+def test_probe_sweep_smoke(tmp_path):
+    result = subprocess.run(
+        [sys.executable, str(ROOT / "experiments" / "probe_sweep_pad5x5.py"), "--smoke", "--output", str(tmp_path)],
+        capture_output=True, text=True, timeout=1200,
+    )
+    assert result.returncode == 0, result.stderr[-3000:]
+    report = json.loads((tmp_path / "probe_sweep_pad5x5.json").read_text())
+    assert (tmp_path / "probe_sweep_pad5x5.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not list(tmp_path.glob(".*partial*")), "partial files are removed after a finished run"
+    for name, sweep in report["sweeps"].items():
+        assert sweep["all_converged"], name
+        assert sweep["max_force_error_N"] < 1e-6, name
+        centre = sweep["cells"]["b22"]
+        assert centre["peak_within_0.1mm"], (name, centre)
+        assert 1.0 < centre["fwhm_mm"] < 4.0, (name, centre)
