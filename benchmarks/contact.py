@@ -34,6 +34,7 @@ sys.path.insert(0, str(Path(__file__).parents[1] / "tests"))
 from drake_reference import DrakeScene  # noqa: E402
 
 from hydrotact.contact import (  # noqa: E402
+    Capacity,
     HalfSpace,
     calc_contact_surface,
     compute_contact_surface,
@@ -77,7 +78,7 @@ def _drake_seconds_per_query(vtk_path, other, translations, repeats=3):
     return statistics.median(timings)
 
 
-def _ours_seconds_per_batch(field, other, translations, capacity, repeats=3):
+def _ours_seconds_per_batch(field, other, translations, capacity, chunk=CHUNK, repeats=3):
     clusters = make_tet_clusters(field.vertices, field.tets)
 
     def wrench(translation):
@@ -86,7 +87,7 @@ def _ours_seconds_per_batch(field, other, translations, capacity, repeats=3):
         return force, torque, surface.total_area, surface.overflow
 
     count = len(translations)
-    chunk = min(CHUNK, count)
+    chunk = min(chunk, count)
     padded = int(np.ceil(count / chunk)) * chunk
     batch = jnp.asarray(np.concatenate([translations, np.repeat(translations[-1:], padded - count, axis=0)]))
 
@@ -107,6 +108,7 @@ def _ours_seconds_per_batch(field, other, translations, capacity, repeats=3):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--batches", type=int, nargs="+", default=[1, 64, 4096])
+    parser.add_argument("--chunk", type=int, default=CHUNK, help="poses per vmapped chunk (lax.map over chunks)")
     args = parser.parse_args()
     from pydrake.geometry import HalfSpace as DrakeHalfSpace
 
@@ -127,13 +129,17 @@ def main():
             field = make_pressure_field(mesh, calc_distance_field(mesh), MODULUS)
             drake_translations = _poses(case, 64)
             drake_seconds = _drake_seconds_per_query(vtk, drake_other, drake_translations)
-            _, capacity = compute_contact_surface(field, ours_other, jax.vmap(make_pose)(jnp.asarray(_poses(case, 64))))
+            # Start small and let compute_contact_surface grow the buffers to these poses.
+            _, capacity = compute_contact_surface(
+                field, ours_other, jax.vmap(make_pose)(jnp.asarray(_poses(case, 64))), Capacity(64, 64, 64, 256)
+            )
             for batch in args.batches:
-                seconds, _ = _ours_seconds_per_batch(field, ours_other, _poses(case, batch), capacity)
+                seconds, _ = _ours_seconds_per_batch(field, ours_other, _poses(case, batch), capacity, args.chunk)
                 row = {
                     "case": case,
                     "batch": batch,
-                    "capacity_pairs": capacity.pairs,
+                    "capacity": list(capacity.sizes),
+                    "chunk": min(args.chunk, batch),
                     "ours_surfaces_per_s": batch / seconds,
                     "drake_surfaces_per_s": 1.0 / drake_seconds,
                     "ratio": (batch / seconds) * drake_seconds,

@@ -112,8 +112,8 @@ def test_broad_phase_matches_brute_force_soft_rigid():
     for xyz in ([0.3e-3, -0.2e-3, 3.6e-3], [6.3e-3, 0.0, 3.5e-3], [0.0, 0.0, 5e-3]):
         X = make_pose(xyz, [0.05, 0.1, 0.2])
         brute = calc_soft_rigid_surface(field, probe, X, brute_force=True)
-        _assert_same_surface(calc_soft_rigid_surface(field, probe, X, Capacity(1024, 256, 4096)), brute)
-        _assert_same_surface(calc_soft_rigid_surface(field, probe, X, Capacity(1024, 256, 4096), clusters=clusters), brute)
+        _assert_same_surface(calc_soft_rigid_surface(field, probe, X, Capacity(1024, 256, 8192)), brute)
+        _assert_same_surface(calc_soft_rigid_surface(field, probe, X, Capacity(1024, 256, 8192), clusters=clusters), brute)
 
 
 def test_broad_phase_matches_brute_force_half_space_and_soft_soft():
@@ -122,9 +122,9 @@ def test_broad_phase_matches_brute_force_half_space_and_soft_soft():
     brute = calc_half_space_surface(field, X, brute_force=True)
     _assert_same_surface(calc_half_space_surface(field, X), brute)
     clusters = make_tet_clusters(field.vertices, field.tets, cluster_size=16)
-    _assert_same_surface(calc_half_space_surface(field, X, Capacity(512, 0, 1024), clusters=clusters), brute)
+    _assert_same_surface(calc_half_space_surface(field, X, Capacity(512, 0, 0, 1024), clusters=clusters), brute)
     X_SB = make_pose([1e-3, 0.5e-3, 9e-3], [0.3, 0.1, 0.0])
-    culled = calc_soft_soft_surface(field, field, X_SB, Capacity(512, 512, 4096))
+    culled = calc_soft_soft_surface(field, field, X_SB, Capacity(512, 512, 0, 4096))
     brute = calc_soft_soft_surface(field, field, X_SB, brute_force=True)
     _assert_same_surface(culled, brute)
     assert int(culled.num_polygons) > 10
@@ -134,10 +134,17 @@ def test_overflow_is_detected_and_retried():
     field = make_pressure_field(mesh := make_seed_mesh("pad5x5", 1.1e-3), calc_distance_field(mesh), E)
     probe = make_cylinder_probe(2e-3, num_sides=16)
     X = make_pose([0.0, 0.0, 3.5e-3])
-    small = calc_soft_rigid_surface(field, probe, X, Capacity(64, 64, 128))
-    assert bool(small.overflow) and int(small.needed[2]) > 128
-    surface, capacity = compute_contact_surface(field, probe, X, Capacity(64, 64, 128))
-    assert not bool(surface.overflow) and capacity.pairs > 128
+    small = calc_soft_rigid_surface(field, probe, X, Capacity(64, 64, 128, 128))
+    assert bool(small.overflow) and int(small.needed[3]) > 128
+    surface, capacity = compute_contact_surface(field, probe, X, Capacity(64, 64, 128, 128))
+    assert not bool(surface.overflow) and capacity.polygons > 128
+    # The half-space's two buffers (tets by cluster, then polygons) grow as well.
+    X_half = make_pose([0.0, 0.0, 3.5e-3])
+    small = calc_half_space_surface(field, X_half, Capacity(64, 0, 0, 64), clusters=make_tet_clusters(field.vertices, field.tets))
+    assert bool(small.overflow) and int(small.needed[0]) > 64
+    half_space, half_capacity = compute_contact_surface(field, HalfSpace(), X_half, Capacity(64, 0, 0, 64))
+    assert not bool(half_space.overflow) and half_capacity.tets > 64 and half_capacity.polygons > 64
+    assert int(half_space.num_polygons) == int(calc_half_space_surface(field, X_half, brute_force=True).num_polygons)
     reference, _ = compute_contact_surface(field, probe, X)
     np.testing.assert_allclose(np.asarray(surface.calc_force()), np.asarray(reference.calc_force()), rtol=1e-12, atol=1e-15)
 
@@ -201,7 +208,7 @@ def _pad_setup():
 def test_gradients_wrt_pose_modulus_and_field_soft_rigid(rng):
     mesh, strain = _pad_setup()
     probe = make_sphere_probe(1.5e-3, subdivisions=2)
-    capacity = Capacity(2048, 512, 8192)
+    capacity = Capacity(2048, 512, 0, 4096)
 
     def summary(translation, rotation_vector, modulus, strain):
         field = make_pressure_field(mesh, strain, modulus)
@@ -228,7 +235,7 @@ def test_gradients_half_space_and_soft_soft(rng):
 
     _check_jacobians(half_space, (jnp.array([0.1e-3, 0.2e-3, 3.7e-3]), jnp.array([0.1, 0.05, 0.0]), jnp.asarray(E), strain), (1e-8, 1e-5, 1.0, 1e-5), rng, mesh.vertices_tagged(FREE))
 
-    capacity = Capacity(1024, 1024, 4096)
+    capacity = Capacity(1024, 1024, 0, 4096)
 
     def soft_soft(translation, rotation_vector, modulus, strain):
         field_a = make_pressure_field(mesh, strain, modulus)

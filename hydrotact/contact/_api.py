@@ -1,6 +1,8 @@
 """Host-level entry points: dispatch on the kind of the other body, batch over poses,
 and grow the buffers until nothing overflows."""
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import numpy as np
@@ -51,7 +53,7 @@ def compute_contact_surface(
     soft: PressureField, other, X_SO: Pose, capacity: Capacity | None = None, clusters: TetClusters | None = None
 ) -> tuple[ContactSurface, Capacity]:
     """Contact surfaces for one pose or a batch (X_SO with a leading axis), growing each
-    overflowing buffer to the next power of two that fits, and recomputing, until no
+    overflowing buffer to the next size that fits (Capacity.grown_to), and recomputing, until no
     pose overflows. Never returns a truncated surface.
 
     **Returns:** (surface, the capacity that sufficed; reuse it for similar poses to
@@ -63,15 +65,26 @@ def compute_contact_surface(
     batched = np.ndim(X_SO.translation) == 2
     while True:
         surface = (_batched if batched else _single)(soft, other, X_SO, capacity, clusters)
-        if not bool(np.any(np.asarray(surface.overflow))):
+        overflow = np.asarray(surface.overflow)
+        if not bool(np.any(overflow)):
             return surface, capacity
-        needed = np.max(np.asarray(surface.needed).reshape(-1, 3), axis=0)
-        if needed[2] > MAX_PAIRS:
-            raise HydrotactError(
-                f"the contact needs more than {MAX_PAIRS} candidate pairs ({int(needed[2])} found); "
-                "the bodies overlap too deeply"
-            )
-        grown = capacity.grown_to(needed)
-        if grown == capacity:  # a count that does not map onto one buffer: grow them all
-            grown = Capacity(2 * capacity.tets, 2 * capacity.others, 2 * capacity.pairs)
-        capacity = grown
+        capacity = grown_contact_capacity(capacity, np.asarray(surface.needed)[overflow] if batched else surface.needed)
+
+
+def grown_contact_capacity(capacity: Capacity, needed) -> Capacity:
+    """The capacity to retry with after an overflow: each buffer grown to the next
+    size (Capacity.grown_to) that holds what the overflowing surfaces `needed` (rows of
+    `ContactSurface.needed`), or every buffer doubled where the counts map onto none;
+    a clear error past MAX_PAIRS candidate pairs (host)."""
+    needed = np.asarray(needed)
+    needed = np.max(needed.reshape(-1, needed.shape[-1]), axis=0)
+    most = int(max(needed[2:]))  # candidate pairs and polygons
+    if most > MAX_PAIRS:
+        raise HydrotactError(
+            f"the contact needs more than {MAX_PAIRS} candidate pairs ({most} found); "
+            "the bodies overlap too deeply"
+        )
+    grown = capacity.grown_to(needed)
+    if grown == capacity:  # a count that does not map onto one buffer: grow them all
+        grown = Capacity(*(2 * getattr(capacity, field.name) for field in dataclasses.fields(capacity)))
+    return grown

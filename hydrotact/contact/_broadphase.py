@@ -17,25 +17,38 @@ from .._types import Array, Int
 class Capacity(eqx.Module):
     """Buffer sizes for the contact broad phase (static: changing one recompiles).
 
-    - `tets`: soft tets near the other body.
+    - `tets`: soft tets near the other body (in whole clusters when clustered).
     - `others`: rigid triangles (or the other soft body's tets) near the soft body.
-    - `pairs`: candidate pairs, and so contact polygons.
+    - `pairs`: candidate pairs whose boxes overlap (soft-rigid; counted in tet
+      slots, cluster by cluster when clustered).
+    - `polygons`: the contact polygons, the size of the returned surface: the
+      candidate pairs that survive the separating-plane tests (soft-rigid), the cut
+      tets (half-space), the overlapping tet pairs (soft-soft).
     """
 
     tets: int = eqx.field(static=True, default=256)
     others: int = eqx.field(static=True, default=256)
-    pairs: int = eqx.field(static=True, default=1024)
+    pairs: int = eqx.field(static=True, default=4096)
+    polygons: int = eqx.field(static=True, default=1024)
 
     def grown_to(self, needed) -> "Capacity":
-        """The smallest capacity, in powers of two, at least this one and `needed`."""
+        """The smallest capacity at least this one and `needed` (tets, others, pairs,
+        polygons), each buffer rounded up to 4, 5, 6 or 7 times a power of two (at
+        most 25 % more than needed, and few distinct sizes to compile)."""
 
         def fit(current, need):
-            size = current
-            while size < need:
-                size *= 2
-            return size
+            if need <= current:
+                return current
+            scale = 1
+            while 7 * scale < need:
+                scale *= 2
+            return max(current, next(m * scale for m in (4, 5, 6, 7) if m * scale >= need))
 
-        return Capacity(fit(self.tets, needed[0]), fit(self.others, needed[1]), fit(self.pairs, needed[2]))
+        return Capacity(*(fit(current, need) for current, need in zip(self.sizes, needed)))
+
+    @property
+    def sizes(self) -> tuple[int, int, int, int]:
+        return (self.tets, self.others, self.pairs, self.polygons)
 
 
 def calc_boxes(points):
@@ -47,11 +60,31 @@ def boxes_overlap(lo_a, hi_a, lo_b, hi_b):
     return jnp.all((lo_a <= hi_b) & (lo_b <= hi_a), axis=-1)
 
 
+def _cumsum(flags, block: int = 128):
+    """Inclusive prefix sum of a 1-D int array, blocked (a scan within blocks of
+    `block`, then one over the block totals): several times faster on the CPU than a
+    scan over the whole array."""
+    n = flags.shape[0]
+    if n <= block:
+        return jnp.cumsum(flags)
+    padded = -(-n // block) * block
+    blocks = jnp.concatenate([flags, jnp.zeros(padded - n, flags.dtype)]).reshape(-1, block)
+    within = jnp.cumsum(blocks, axis=1)
+    totals = within[:, -1]
+    return (within + (jnp.cumsum(totals) - totals)[:, None]).reshape(-1)[:n]
+
+
 def select(mask, capacity: int):
-    """Indices of True entries, padded with -1 to `capacity`, a validity mask, and the
-    number of True entries (which may exceed capacity: overflow)."""
-    (index,) = jnp.nonzero(mask, size=capacity, fill_value=-1)
-    return index, index >= 0, jnp.sum(mask)
+    """Indices of True entries (in order), padded with -1 to `capacity`, a validity
+    mask, and the number of True entries (which may exceed capacity: overflow).
+
+    A prefix sum gives each True entry its slot; one scatter writes the indices
+    (entries past the capacity are dropped, and counted)."""
+    flags = mask.reshape(-1).astype(jnp.int32)
+    position = _cumsum(flags)
+    target = jnp.where(flags > 0, position - 1, capacity)
+    index = jnp.full(capacity, -1, jnp.int32).at[target].set(jnp.arange(flags.shape[0], dtype=jnp.int32), mode="drop")
+    return index, index >= 0, position[-1]
 
 
 def select_pairs(lo_a, hi_a, valid_a, lo_b, hi_b, valid_b, capacity: int, also=None):
@@ -144,3 +177,27 @@ def select_clustered_tets(clusters: TetClusters, tet_lo, tet_hi, meets, capacity
     candidates = jnp.maximum(candidates, 0)
     valid = valid & meets(tet_lo[candidates], tet_hi[candidates])
     return jnp.where(valid, candidates, -1).reshape(-1), valid.reshape(-1), num_hit * clusters.cluster_size
+
+
+def calc_cluster_boxes(clusters: TetClusters, tet_points):
+    """Axis-aligned boxes (lo, hi) of each cluster's tets (num_clusters, 3)."""
+    members = jnp.asarray(clusters.members)
+    points = tet_points[jnp.maximum(members, 0)]  # (num_clusters, cluster_size, 4, 3)
+    real = (members >= 0)[..., None, None]
+    big = jnp.asarray(jnp.inf, tet_points.dtype)
+    return jnp.min(jnp.where(real, points, big), axis=(1, 2)), jnp.max(jnp.where(real, points, -big), axis=(1, 2))
+
+
+def select_clusters(clusters: TetClusters, tet_points, meets, capacity: int):
+    """The clusters whose boxes pass `meets(lo, hi)`, as their member tets.
+
+    **Returns:** (member tets (num_slots, cluster_size) with -1 for none, validity,
+    slots needed), num_slots = capacity // cluster_size (at least 1); `needed`
+    counts the slots of every passing cluster.
+    """
+    members = jnp.asarray(clusters.members)
+    cluster_lo, cluster_hi = calc_cluster_boxes(clusters, tet_points)
+    hit, hit_valid, num_hit = select(meets(cluster_lo, cluster_hi), max(1, capacity // clusters.cluster_size))
+    candidates = members[jnp.maximum(hit, 0)]
+    valid = hit_valid[:, None] & (candidates >= 0)
+    return jnp.where(valid, candidates, -1), valid, num_hit * clusters.cluster_size

@@ -18,8 +18,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..field import PressureField
-from ._broadphase import Capacity, TetClusters, box_meets_plane, calc_boxes, select, select_clustered_tets
-from ._polygon import calc_polygon_integrals, clip_polygon_by_tet_faces
+from ._broadphase import Capacity, TetClusters, box_meets_plane, select, select_clusters
+from ._polygon import calc_polygon_integrals_columns, clip_polygon_by_tet_faces, to_polygon_rows
 from ._pose import Pose
 from ._soft_rigid import is_normal_along_gradient
 from ._surface import POLYGON_CAPACITY, ContactSurface, assemble_surface
@@ -98,44 +98,92 @@ def slice_tet(tet_vertices, point, normal):
     return clip_polygon_by_tet_faces(square, jnp.asarray(4), tet_vertices)
 
 
+def slice_tets_marching_columns(tet_vertices, tet_values, heights, push):
+    """:func:`slice_tet_marching` for P tets at once, in column layout (see
+    `_polygon.py`): tet_vertices (3, 4, P), tet_values and heights (4, P), push (3,).
+    Every crossing is computed on all six edges, then each polygon slot selects its
+    edge from the case table: no per-vertex gathers.
+
+    **Returns:** (vertices (3, 4, P), values (4, P), counts (P,)).
+    """
+    case = sum(jnp.where(heights[k] > 0.0, 1 << k, 0) for k in range(4))
+    edges = jnp.transpose(jnp.asarray(MARCHING_TETS)[case])  # (4 slots, P)
+    points, values = [], []
+    for a, b in TET_EDGES.tolist():
+        h0, h1 = heights[a], heights[b]
+        denominator = h0 - h1
+        t = jnp.where(denominator != 0.0, h0 / jnp.where(denominator != 0.0, denominator, 1.0), 0.0)
+        points.append(tet_vertices[:, a] + t[None] * (tet_vertices[:, b] - tet_vertices[:, a]))
+        values.append(tet_values[a] + t * (tet_values[b] - tet_values[a]))
+    slot_points, slot_values = [], []
+    for k in range(4):
+        slot_points.append(sum(jnp.where(edges[k][None] == e, points[e], 0.0) for e in range(6)))
+        slot_values.append(sum(jnp.where(edges[k] == e, values[e], 0.0) for e in range(6)))
+    count = jnp.sum(edges >= 0, axis=0)
+    # Wind counter-clockwise about push: reverse the cycle when it runs the other way
+    # (slots 1 and 3 swap for a quadrilateral, 1 and 2 for a triangle).
+    p0, p1, p2, p3 = slot_points
+    normal = jnp.cross(p1 - p0, p2 - p0, axis=0)
+    flip = jnp.sum(normal * push[:, None], axis=0) < 0.0
+    quad = count == 4
+    v0, v1, v2, v3 = slot_values
+    order = (
+        (p0, v0),
+        (jnp.where(flip[None], jnp.where(quad[None], p3, p2), p1), jnp.where(flip, jnp.where(quad, v3, v2), v1)),
+        (jnp.where((flip & ~quad)[None], p1, p2), jnp.where(flip & ~quad, v1, v2)),
+        (jnp.where((flip & quad)[None], p1, p3), jnp.where(flip & quad, v1, v3)),
+    )
+    return jnp.stack([p for p, _ in order], axis=1), jnp.stack([v for _, v in order]), count
+
+
 def calc_half_space_surface(
     field: PressureField, X_SR: Pose, capacity: Capacity = Capacity(), brute_force: bool = False, clusters: TetClusters | None = None
 ) -> ContactSurface:
     """The contact surface of a soft body and the rigid half-space z >= 0 of frame R
     (pure, jittable, vmappable over X_SR, differentiable). `brute_force` slices every
-    tet (the reference for the culling); `clusters` makes the tet search hierarchical."""
+    tet (the reference for the culling); `clusters` makes the tet search hierarchical.
+
+    The cut tets go to the `polygons` buffer; with clusters, the clusters whose boxes
+    the plane crosses fill the `tets` buffer first.
+    """
     inward = X_SR.rotate(jnp.array([0.0, 0.0, 1.0], field.vertices.dtype))
     point = X_SR.translation.astype(field.vertices.dtype)
     push = -inward  # the force on the soft body points out of the rigid body
     tet_points = field.vertices[field.tets]
+    # Heights per vertex, gathered per tet: every tet sees the same value at a vertex.
+    vertex_heights = jnp.einsum("vd,d->v", field.vertices, inward) - jnp.dot(point, inward)
     if brute_force or clusters is None:
-        heights = jnp.einsum("tkd,d->tk", tet_points, inward) - jnp.dot(point, inward)
+        heights = vertex_heights[field.tets]
         cut = (jnp.min(heights, axis=1) <= 0.0) & (jnp.max(heights, axis=1) >= 0.0)
-        size = tet_points.shape[0] if brute_force else capacity.pairs
+        size = tet_points.shape[0] if brute_force else capacity.polygons
         tets, tets_valid, num_tets = select(jnp.ones_like(cut) if brute_force else cut, size)
         tet_index = jnp.maximum(tets, 0)
         tet_heights = heights[tet_index]
         near_overflow, num_near = jnp.asarray(False), jnp.asarray(0)
     else:
-        tet_lo, tet_hi = calc_boxes(tet_points)
-        near, near_valid, num_near = select_clustered_tets(clusters, tet_lo, tet_hi, box_meets_plane(point, inward), capacity.tets)
-        near = jnp.maximum(near, 0)
-        near_heights = jnp.einsum("tkd,d->tk", tet_points[near], inward) - jnp.dot(point, inward)
-        cut = near_valid & (jnp.min(near_heights, axis=1) <= 0.0) & (jnp.max(near_heights, axis=1) >= 0.0)
-        size = capacity.pairs
+        near, near_valid, num_near = select_clusters(clusters, tet_points, box_meets_plane(point, inward), capacity.tets)
+        near = jnp.maximum(near, 0).reshape(-1)
+        near_heights = vertex_heights[field.tets[near]]
+        cut = near_valid.reshape(-1) & (jnp.min(near_heights, axis=1) <= 0.0) & (jnp.max(near_heights, axis=1) >= 0.0)
+        size = capacity.polygons
         chosen, tets_valid, num_tets = select(cut, size)
         tet_index = near[jnp.maximum(chosen, 0)]
         tet_heights = near_heights[jnp.maximum(chosen, 0)]
         near_overflow = num_near > near.shape[0]
-    gradients = field.calc_tet_pressure_gradients()
-    vertex_pressures = field.vertex_pressures[field.tets]
-
-    def polygon(tet_vertices, tet_pressures, tet_heights):
-        vertices, pressures, count = slice_tet_marching(tet_vertices, tet_pressures, tet_heights, push)
-        return (vertices, pressures, count, *calc_polygon_integrals(vertices, count, pressures, push))
-
-    polygons = jax.vmap(polygon)(tet_points[tet_index], vertex_pressures[tet_index], tet_heights)
+    # One gather per polygon: the tet's vertices, vertex pressures and gradient.
+    tet_rows = jnp.concatenate(
+        [tet_points.reshape(-1, 12), field.vertex_pressures[field.tets], field.calc_tet_pressure_gradients()], axis=1
+    )
+    rows = tet_rows[tet_index].T  # (19, size)
+    gradients = rows[16:19].T
+    vertices, pressures, counts = slice_tets_marching_columns(
+        jnp.transpose(rows[:12].reshape(4, 3, -1), (1, 0, 2)), rows[12:16], tet_heights.T, push
+    )
+    area, integral, first_moment, pressure_moment = calc_polygon_integrals_columns(vertices, counts, pressures, push[:, None])
+    vertices, pressures = to_polygon_rows(vertices, pressures, POLYGON_CAPACITY)
+    polygons = (vertices, pressures, counts, area, integral, first_moment.T, pressure_moment.T)
     normals = jnp.broadcast_to(push[None], (size, 3))
-    keep = jax.vmap(is_normal_along_gradient, in_axes=(None, 0))(push, gradients[tet_index])
+    keep = jax.vmap(is_normal_along_gradient, in_axes=(None, 0))(push, gradients)
     overflow = (num_tets > size) | near_overflow
-    return assemble_surface(polygons, normals, tets_valid, keep, tet_index, jnp.full(size, -1), overflow, jnp.array([num_near, 0, num_tets]))
+    needed = jnp.array([num_near, 0, 0, num_tets])
+    return assemble_surface(polygons, normals, tets_valid, keep, tet_index, jnp.full(size, -1), overflow, needed)

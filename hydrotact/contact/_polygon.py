@@ -89,3 +89,112 @@ def calc_polygon_integrals(vertices, count, pressures, normal):
 
 
 batched_clip_by_tet = jax.vmap(clip_polygon_by_tet_faces)
+
+
+# Column layout: many polygons at once, the polygon index last, so that every step is
+# an elementwise operation over long contiguous rows (what XLA's CPU backend
+# vectorises well). vertices (3, n, P), pressures (n, P), counts (P,). The results
+# are the same as the one-polygon functions above, vertex for vertex.
+
+
+def clip_polygon_columns(vertices, count, normal, offset):
+    """Clip P polygons, each by its own half-space normal . x <= offset (Sutherland-
+    Hodgman, as :func:`clip_polygon`), without gathers.
+
+    Polygons are lists of vertices, each (3, P): the output has one more vertex slot
+    than the input (a convex polygon gains at most one vertex per clip), and output
+    slot s is selected from the vertex (or edge crossing) whose emitted range holds s,
+    by a chain of selects over (P,) rows.
+
+    **Arguments:** vertices: list of n arrays (3, P); count (P,); normal (3, P);
+    offset (P,).
+
+    **Returns:** (list of n + 1 arrays (3, P), count (P,)).
+    """
+    n = len(vertices)
+    distance = [jnp.sum(v * normal, axis=0) - offset for v in vertices]
+    keep, crosses, crossing, starts = [], [], [], []
+    emitted_before = jnp.zeros_like(count)
+    for i in range(n):
+        if i + 1 < n:
+            is_last = i == count - 1
+            following = jnp.where(is_last[None], vertices[0], vertices[i + 1])
+            next_distance = jnp.where(is_last, distance[0], distance[i + 1])
+        else:
+            following, next_distance = vertices[0], distance[0]
+        active = i < count
+        inside = distance[i] <= 0.0
+        crosses.append(active & (inside != (next_distance <= 0.0)))
+        t = safe_div(distance[i], distance[i] - next_distance)
+        crossing.append(vertices[i] + t[None] * (following - vertices[i]))
+        keep.append(active & inside)
+        starts.append(emitted_before)
+        emitted_before = emitted_before + keep[i].astype(count.dtype) + crosses[i].astype(count.dtype)
+    out = []
+    for s in range(n + 1):
+        slot = jnp.zeros_like(vertices[0])
+        for i in range(n):
+            # Vertex i emits at most two points, at slots starts[i] <= 2 i and the next.
+            if 2 * i >= s:
+                slot = jnp.where((keep[i] & (starts[i] == s))[None], vertices[i], slot)
+            if 2 * i + 1 >= s:
+                slot = jnp.where((crosses[i] & (starts[i] + keep[i].astype(count.dtype) == s))[None], crossing[i], slot)
+        out.append(slot)
+    return out, jnp.minimum(emitted_before, n + 1)
+
+
+def clip_polygon_by_tet_faces_columns(vertices, count, face_planes):
+    """Clip P polygons by the four faces of their tets: `face_planes` (4, 4, P) holds
+    each face's outward normal (rows 0-2) and offset (row 3), as
+    :func:`calc_tet_face_planes` gives them. vertices (3, n, P) -> (3, n + 4, P)."""
+    vertices = [vertices[:, k] for k in range(vertices.shape[1])]
+    for face in range(4):
+        vertices, count = clip_polygon_columns(vertices, count, face_planes[face, :3], face_planes[face, 3])
+    return jnp.stack(vertices, axis=1), count
+
+
+def calc_tet_face_planes(tet_vertices):
+    """Outward face planes (normal . x <= offset inside) of positively oriented tets
+    (..., 4, 3), the faces in the order :func:`clip_polygon_by_tet_faces` clips by:
+    (..., 4 faces, 4) with the unnormalised normal in 0-2 and the offset in 3."""
+    planes = []
+    for face in ([1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]):
+        a, b, c = tet_vertices[..., face[0], :], tet_vertices[..., face[1], :], tet_vertices[..., face[2], :]
+        outward = jnp.cross(b - a, c - a)
+        planes.append(jnp.concatenate([outward, jnp.sum(outward * a, axis=-1, keepdims=True)], axis=-1))
+    return jnp.stack(planes, axis=-2)
+
+
+def calc_polygon_integrals_columns(vertices, count, pressures, normal):
+    """:func:`calc_polygon_integrals` for P polygons: vertices (3, n, P), count (P,),
+    pressures (n, P), normal (3, P).
+
+    **Returns:** (area (P,), int p dA (P,), int x dA (3, P), int p x dA (3, P)).
+    """
+    n = vertices.shape[1]
+    v0, p0 = vertices[:, 0], pressures[0]
+    area = force = first_moment = pressure_moment = 0.0
+    for i in range(1, n - 1):
+        vi, vj, pi, pj = vertices[:, i], vertices[:, i + 1], pressures[i], pressures[i + 1]
+        fan = 0.5 * jnp.sum(jnp.cross(vi - v0, vj - v0, axis=0) * normal, axis=0)
+        fan = jnp.where(i + 1 < count, fan, 0.0)
+        sum_p = p0 + pi + pj
+        sum_x = v0 + vi + vj
+        area = area + fan
+        force = force + fan * sum_p
+        first_moment = first_moment + fan[None] * sum_x
+        weighted = p0[None] * v0 + pi[None] * vi + pj[None] * vj + sum_p[None] * sum_x
+        pressure_moment = pressure_moment + fan[None] * weighted
+    return area, force / 3.0, first_moment / 3.0, pressure_moment / 12.0
+
+
+def to_polygon_rows(vertices, pressures, capacity):
+    """Column-layout polygons (3, n, P), (n, P) to the ContactSurface layout
+    (P, capacity, 3), (P, capacity), padding with zeros."""
+    n = vertices.shape[1]
+    vertices = jnp.transpose(vertices, (2, 1, 0))
+    pressures = jnp.transpose(pressures)
+    if n < capacity:
+        vertices = jnp.concatenate([vertices, jnp.zeros((vertices.shape[0], capacity - n, 3), vertices.dtype)], axis=1)
+        pressures = jnp.concatenate([pressures, jnp.zeros((pressures.shape[0], capacity - n), pressures.dtype)], axis=1)
+    return vertices, pressures

@@ -11,8 +11,15 @@ import jax
 import jax.numpy as jnp
 
 from ..field import PressureField
-from ._broadphase import Capacity, TetClusters, box_meets_region, boxes_overlap, calc_boxes, select, select_clustered_tets, select_pairs
-from ._polygon import calc_polygon_integrals, clip_polygon_by_tet_faces
+from ._broadphase import Capacity, TetClusters, boxes_overlap, calc_boxes, calc_cluster_boxes, select
+from ._polygon import (
+    calc_polygon_integrals,
+    calc_polygon_integrals_columns,
+    calc_tet_face_planes,
+    clip_polygon_by_tet_faces,
+    clip_polygon_by_tet_faces_columns,
+    to_polygon_rows,
+)
 from ._pose import Pose
 from ._rigid import RigidSurface
 from ._surface import POLYGON_CAPACITY, ContactSurface, assemble_surface
@@ -38,11 +45,96 @@ def is_normal_along_gradient(normal, gradient):
 
 
 def _polygon_from_pair(tet_vertices, triangle, normal, offset, gradient):
+    """One pair, row layout (the reference the column kernel below reproduces)."""
     vertices = jnp.zeros((POLYGON_CAPACITY, 3), triangle.dtype).at[:3].set(triangle)
     vertices, count = clip_polygon_by_tet_faces(vertices, jnp.asarray(3), tet_vertices)
     pressures = offset + vertices @ gradient
     area, integral, first_moment, pressure_moment = calc_polygon_integrals(vertices, count, pressures, normal)
     return vertices, pressures, count, area, integral, first_moment, pressure_moment
+
+
+# Separation tests cull a pair only when it is separated by more than this fraction of
+# the coordinates' magnitude (a picometre at centimetre scale), far above round-off:
+# a culled pair is one whose clipped polygon would have been empty.
+SEPARATION_TOLERANCE = 1e-10
+
+# The cluster search holds this many times `Capacity.tets` tet slots before the tets
+# inside the region are compacted into the `tets` buffer.
+CLUSTER_SEARCH = 4
+
+
+def _tet_columns(tet_points, face_planes):
+    """Per-tet data the pair tests read, one row per quantity (39, num_tets): vertices
+    (12, vertex-major), box lo (3), hi (3), face planes (16, face-major: outward
+    normal, offset), the face normals' lengths (4), the largest coordinate (1)."""
+    lo, hi = calc_boxes(tet_points)
+    lengths = jnp.sqrt(jnp.sum(face_planes[..., :3] ** 2, axis=-1))
+    reach = jnp.max(jnp.maximum(jnp.abs(lo), jnp.abs(hi)), axis=-1, keepdims=True)
+    return jnp.concatenate([tet_points.reshape(-1, 12), lo, hi, face_planes.reshape(-1, 16), lengths, reach], axis=1).T
+
+
+def _triangle_columns(triangles, normals):
+    """Per-triangle data the pair tests read (35, num_triangles): vertices (9), box lo
+    (3), hi (3), unit normal (3), plane offset (1), edge planes (12: for each edge the
+    outward in-plane normal (end - start) x normal, then its offset), the edge
+    normals' lengths (3), the largest coordinate (1)."""
+    lo, hi = calc_boxes(triangles)
+    offset = jnp.sum(normals * triangles[:, 0], axis=-1, keepdims=True)
+    edges, lengths = [], []
+    for e in range(3):
+        start, end = triangles[:, e], triangles[:, (e + 1) % 3]
+        outward = jnp.cross(end - start, normals)
+        edges += [outward, jnp.sum(outward * start, axis=-1, keepdims=True)]
+        lengths.append(jnp.sqrt(jnp.sum(outward * outward, axis=-1, keepdims=True)))
+    reach = jnp.max(jnp.maximum(jnp.abs(lo), jnp.abs(hi)), axis=-1, keepdims=True)
+    return jnp.concatenate([triangles.reshape(-1, 9), lo, hi, normals, offset, *edges, *lengths, reach], axis=1).T
+
+
+def _pairs_may_meet(tet, triangle):
+    """Which of S tets and T triangles may meet, as a dense (S, T) mask (`tet` (39, S)
+    from `_tet_columns`, `triangle` (35, T) from `_triangle_columns`).
+
+    A pair is kept when the boxes overlap, the tet straddles the triangle's plane, and
+    no tet face plane and no triangle edge plane separates them. Every plane is a face
+    of one of the two convex bodies, so no pair whose intersection has positive area
+    is culled; the face and edge tests cull only pairs apart by more than
+    SEPARATION_TOLERANCE times the coordinates' magnitude (far above round-off).
+    Written as (S, 1) against (1, T) rows so that it vectorises on the CPU.
+    """
+
+    def by_tet(row):
+        return tet[row][:, None]
+
+    def by_triangle(row):
+        return triangle[row][None, :]
+
+    meet = None
+    for axis in range(3):
+        overlap = (by_tet(12 + axis) <= by_triangle(12 + axis)) & (by_triangle(9 + axis) <= by_tet(15 + axis))
+        meet = overlap if meet is None else meet & overlap
+    heights = [
+        by_tet(3 * k) * by_triangle(15) + by_tet(3 * k + 1) * by_triangle(16) + by_tet(3 * k + 2) * by_triangle(17) - by_triangle(18)
+        for k in range(4)
+    ]
+    lowest = jnp.minimum(jnp.minimum(heights[0], heights[1]), jnp.minimum(heights[2], heights[3]))
+    highest = jnp.maximum(jnp.maximum(heights[0], heights[1]), jnp.maximum(heights[2], heights[3]))
+    meet = meet & (lowest <= 0.0) & (highest >= 0.0)
+    scale = SEPARATION_TOLERANCE * jnp.maximum(by_tet(38), by_triangle(34))
+    for f in range(4):
+        row = 18 + 4 * f
+        nearest = None
+        for v in range(3):
+            d = by_tet(row) * by_triangle(3 * v) + by_tet(row + 1) * by_triangle(3 * v + 1) + by_tet(row + 2) * by_triangle(3 * v + 2)
+            nearest = d if nearest is None else jnp.minimum(nearest, d)
+        meet = meet & (nearest - by_tet(row + 3) <= scale * by_tet(34 + f))
+    for e in range(3):
+        row = 19 + 4 * e
+        nearest = None
+        for k in range(4):
+            d = by_tet(3 * k) * by_triangle(row) + by_tet(3 * k + 1) * by_triangle(row + 1) + by_tet(3 * k + 2) * by_triangle(row + 2)
+            nearest = d if nearest is None else jnp.minimum(nearest, d)
+        meet = meet & (nearest - by_triangle(row + 3) <= scale * by_triangle(31 + e))
+    return meet
 
 
 def calc_soft_rigid_surface(
@@ -60,50 +152,79 @@ def calc_soft_rigid_surface(
     `brute_force` clips every tet against every triangle (the reference for the broad
     phase; its buffers hold num_tets x num_faces polygons and never overflow).
     `clusters` (from :func:`make_tet_clusters`) makes the tet search hierarchical.
+
+    Broad phase: the tets (found through their clusters) and the triangles whose
+    boxes meet both bodies' boxes (`tets`, `others` buffers); then every such tet
+    against every such triangle, at once: boxes, the triangle's plane, the tet's face
+    planes and the triangle's edge planes (:func:`_pairs_may_meet`); the pairs that
+    pass (`polygons`) are clipped, in column layout (see `_polygon.py`). The `pairs`
+    buffer is not used here (`needed[2]` is 0).
     """
-    vertices_S = X_SR.apply(jnp.asarray(rigid.vertices_R, field.vertices.dtype))
+    dtype = field.vertices.dtype
+    vertices_S = X_SR.apply(jnp.asarray(rigid.vertices_R, dtype))
     triangles = vertices_S[rigid.faces]
     triangle_normals = jnp.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
     norms = jnp.sqrt(jnp.maximum(jnp.sum(triangle_normals**2, axis=-1, keepdims=True), 1e-300))
     triangle_normals = triangle_normals / norms
     tet_points = field.vertices[field.tets]
-
-    tet_lo, tet_hi = calc_boxes(tet_points)
-    tri_lo, tri_hi = calc_boxes(triangles)
-    soft_lo, soft_hi = jnp.min(tet_lo, axis=0), jnp.max(tet_hi, axis=0)
-    rigid_lo, rigid_hi = jnp.min(tri_lo, axis=0), jnp.max(tri_hi, axis=0)
-    region_lo, region_hi = jnp.maximum(soft_lo, rigid_lo), jnp.minimum(soft_hi, rigid_hi)
+    face_planes = calc_tet_face_planes(tet_points)  # (num_tets, 4, 4)
 
     if brute_force:
         num_tets, num_tris = tet_points.shape[0], triangles.shape[0]
         tet_index = jnp.repeat(jnp.arange(num_tets), num_tris)
         tri_index = jnp.tile(jnp.arange(num_tris), num_tets)
         pair_valid = jnp.ones(tet_index.shape, dtype=bool)
-        needed = jnp.array([num_tets, num_tris, tet_index.shape[0]])
+        needed = jnp.array([num_tets, num_tris, tet_index.shape[0], tet_index.shape[0]])
         overflow = jnp.asarray(False)
     else:
-        if clusters is None:
-            tets, tets_valid, num_tets = select(boxes_overlap(tet_lo, tet_hi, region_lo[None], region_hi[None]), capacity.tets)
-        else:
-            meets = box_meets_region(region_lo, region_hi)
-            tets, tets_valid, num_tets = select_clustered_tets(clusters, tet_lo, tet_hi, meets, capacity.tets)
+        if clusters is None:  # every tet its own cluster
+            clusters = TetClusters(members=jnp.arange(tet_points.shape[0], dtype=jnp.int32)[:, None])
+        members = jnp.asarray(clusters.members)
+        cluster_size = clusters.cluster_size
+        tet_rows = _tet_columns(tet_points, face_planes).T  # (num_tets, 39)
+        triangle_columns = _triangle_columns(triangles, triangle_normals)
+        cluster_lo, cluster_hi = calc_cluster_boxes(clusters, tet_points)
+        tri_lo, tri_hi = triangle_columns[9:12].T, triangle_columns[12:15].T
+        region_lo = jnp.maximum(jnp.min(cluster_lo, axis=0), jnp.min(tri_lo, axis=0))
+        region_hi = jnp.minimum(jnp.max(cluster_hi, axis=0), jnp.max(tri_hi, axis=0))
+        # Tets near the other body: clusters first, then their tets, compacted.
+        num_cluster_slots = max(1, CLUSTER_SEARCH * capacity.tets // cluster_size)
+        hit, _, num_hit = select(boxes_overlap(cluster_lo, cluster_hi, region_lo[None], region_hi[None]), num_cluster_slots)
+        candidates = members[jnp.maximum(hit, 0)].reshape(-1)
+        safe_candidates = jnp.maximum(candidates, 0)
+        candidate_rows = tet_rows[safe_candidates]
+        near_mask = (candidates >= 0) & boxes_overlap(candidate_rows[:, 12:15], candidate_rows[:, 15:18], region_lo[None], region_hi[None])
+        near, near_valid, num_near = select(near_mask, capacity.tets)
+        near = jnp.maximum(near, 0)
+        near_tets = safe_candidates[near]
         tris, tris_valid, num_tris = select(boxes_overlap(tri_lo, tri_hi, region_lo[None], region_hi[None]), capacity.others)
-        safe_tets, safe_tris = jnp.maximum(tets, 0), jnp.maximum(tris, 0)
-        # Separating plane: a tet wholly on one side of a triangle's plane cannot meet it.
-        plane_offsets = jnp.sum(triangle_normals * triangles[:, 0], axis=-1)
-        heights = jnp.einsum("tkd,rd->trk", tet_points[safe_tets], triangle_normals[safe_tris]) - plane_offsets[safe_tris][None, :, None]
-        straddles = (jnp.min(heights, axis=-1) <= 0.0) & (jnp.max(heights, axis=-1) >= 0.0)
-        i, j, pair_valid, num_pairs = select_pairs(
-            tet_lo[safe_tets], tet_hi[safe_tets], tets_valid, tri_lo[safe_tris], tri_hi[safe_tris], tris_valid, capacity.pairs, straddles
+        tris = jnp.maximum(tris, 0)
+        # Every near tet against every near triangle, at once; then the survivors.
+        may_meet = _pairs_may_meet(candidate_rows[near].T, triangle_columns[:, tris])
+        may_meet = may_meet & near_valid[:, None] & tris_valid[None, :]
+        chosen, pair_valid, num_polygons = select(may_meet, capacity.polygons)
+        chosen = jnp.maximum(chosen, 0)
+        tet_index, tri_index = near_tets[chosen // tris.shape[0]], tris[chosen % tris.shape[0]]
+        search_slots = num_cluster_slots * cluster_size
+        needed = jnp.array(
+            [jnp.maximum(num_near, -(-num_hit * cluster_size // CLUSTER_SEARCH)), num_tris, 0, num_polygons]
         )
-        tet_index, tri_index = safe_tets[i], safe_tris[j]
-        needed = jnp.array([num_tets, num_tris, num_pairs])
-        overflow = jnp.any(needed > jnp.array([tets.shape[0], capacity.others, capacity.pairs]))
+        overflow = (
+            (num_hit * cluster_size > search_slots)
+            | (num_near > capacity.tets)
+            | (num_tris > capacity.others)
+            | (num_polygons > capacity.polygons)
+        )
 
     offsets, gradients = calc_tet_pressure_planes(field)
     normals = triangle_normals[tri_index]
-    polygon = jax.vmap(_polygon_from_pair)(
-        tet_points[tet_index], triangles[tri_index], normals, offsets[tet_index], gradients[tet_index]
+    vertices, counts = clip_polygon_by_tet_faces_columns(
+        jnp.transpose(triangles[tri_index], (2, 1, 0)), jnp.full(tri_index.shape, 3), jnp.transpose(face_planes[tet_index], (1, 2, 0))
     )
+    pressures = offsets[tet_index][None] + jnp.sum(vertices * gradients[tet_index].T[:, None], axis=0)
+    pressures = jnp.where(jnp.arange(vertices.shape[1])[:, None] < counts[None], pressures, 0.0)
+    area, integral, first_moment, pressure_moment = calc_polygon_integrals_columns(vertices, counts, pressures, normals.T)
+    vertices, pressures = to_polygon_rows(vertices, pressures, POLYGON_CAPACITY)
+    polygon = (vertices, pressures, counts, area, integral, first_moment.T, pressure_moment.T)
     keep = jax.vmap(is_normal_along_gradient)(normals, gradients[tet_index])
     return assemble_surface(polygon, normals, pair_valid, keep, tet_index, tri_index, overflow, needed)

@@ -57,15 +57,16 @@ def calc_soft_soft_surface(
         a = jnp.repeat(jnp.arange(points_A.shape[0]), points_B.shape[0])
         b = jnp.tile(jnp.arange(points_B.shape[0]), points_A.shape[0])
         pair_valid = jnp.ones(a.shape, dtype=bool)
-        overflow, needed = jnp.asarray(False), jnp.array([points_A.shape[0], points_B.shape[0], a.shape[0]])
+        overflow, needed = jnp.asarray(False), jnp.array([points_A.shape[0], points_B.shape[0], 0, a.shape[0]])
     else:
         tets_A, valid_A, num_A = select(boxes_overlap(lo_A, hi_A, region_lo[None], region_hi[None]), capacity.tets)
         tets_B, valid_B, num_B = select(boxes_overlap(lo_B, hi_B, region_lo[None], region_hi[None]), capacity.others)
         safe_A, safe_B = jnp.maximum(tets_A, 0), jnp.maximum(tets_B, 0)
-        i, j, pair_valid, num_pairs = select_pairs(lo_A[safe_A], hi_A[safe_A], valid_A, lo_B[safe_B], hi_B[safe_B], valid_B, capacity.pairs)
+        # Every overlapping pair is a polygon slot: the pairs go straight to that buffer.
+        i, j, pair_valid, num_pairs = select_pairs(lo_A[safe_A], hi_A[safe_A], valid_A, lo_B[safe_B], hi_B[safe_B], valid_B, capacity.polygons)
         a, b = safe_A[i], safe_B[j]
-        needed = jnp.array([num_A, num_B, num_pairs])
-        overflow = jnp.any(needed > jnp.array([capacity.tets, capacity.others, capacity.pairs]))
+        needed = jnp.array([num_A, num_B, 0, num_pairs])
+        overflow = jnp.any(needed > jnp.array([capacity.tets, capacity.others, capacity.pairs, capacity.polygons]))
     polygons, normals, keep = jax.vmap(_pair_polygon)(
         points_A[a], points_B[b], offsets_A[a], gradients_A[a], offsets_B[b], gradients_B[b]
     )
