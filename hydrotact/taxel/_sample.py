@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import HydrotactError
-from .._math import safe_div, safe_norm
+from .._math import compact_indices, safe_div, safe_norm
 from .._types import Array, Bool, Float, Int
 from ._patterns import TaxelLayout, calc_taxel_rays
 from ._raycast import calc_surface_triangles, intersect_ray_triangle
@@ -50,16 +50,22 @@ class TaxelReadings(eqx.Module):
 
 def _meets_receptive_field(position, axis, size, is_cone, centres, radii):
     """Whether spheres (centres (M, 3), radii (M,)) can meet a taxel's rays: a
-    conservative test against the half-cylinder (disk) or the cone (cone)."""
+    conservative test against the half-cylinder (disk) or the cone (cone).
+
+    With a sphere centre at height h along the axis and radial distance q from it,
+    its distance from a cone of half-angle a is q cos a - h sin a while it lies
+    beside the cone's surface (h cos a + q sin a >= 0), and its distance from the
+    apex otherwise; inside the cone that expression is negative. No trigonometry per
+    sphere."""
     axis = axis / safe_norm(axis)
     offsets = centres - position[None]
     along = offsets @ axis
     radial = safe_norm(offsets - along[:, None] * axis[None])
     slack = 1e-9 * (size + radii) + 1e-12
     disk = (radial <= size + radii + slack) & (along >= -radii - slack)
-    excess = jnp.arctan2(radial, along) - size  # angle outside the cone
-    reach = safe_norm(offsets)
-    distance = jnp.where(excess <= 0.0, 0.0, jnp.where(excess < 0.5 * jnp.pi, reach * jnp.sin(jnp.maximum(excess, 0.0)), reach))
+    cos_a, sin_a = jnp.cos(size), jnp.sin(size)
+    beside = along * cos_a + radial * sin_a >= 0.0
+    distance = jnp.where(beside, radial * cos_a - along * sin_a, safe_norm(offsets))
     cone = distance <= radii + slack
     return jnp.where(is_cone, cone, disk)
 
@@ -119,21 +125,24 @@ def calc_taxel_pressures(
         layout.positions_S, layout.axes_S, layout.field_sizes, layout.is_cone, centres, radii
     )
     meets = jax.lax.stop_gradient(meets & valid[None, :])
-    (flat,) = jnp.nonzero(meets.reshape(-1), size=capacity, fill_value=-1)
+    flat, needed = compact_indices(meets.reshape(-1), capacity)
     pair_valid = flat >= 0
     safe = jnp.maximum(flat, 0)
-    taxel_of_pair, triangle_of_pair = safe // corners.shape[0], safe % corners.shape[0]
+    # Compaction keeps row-major order, so pairs come sorted by taxel; padding goes to
+    # the last taxel (with no hits) to keep them sorted for the segment reductions.
+    taxel_of_pair = jnp.where(pair_valid, safe // corners.shape[0], num_taxels - 1)
+    triangle_of_pair = safe % corners.shape[0]
 
     pairs_vs_rays = jax.vmap(jax.vmap(_cast, in_axes=(0, 0, None, None, None)))
     hit, t, pressure = pairs_vs_rays(
         origins[taxel_of_pair], directions[taxel_of_pair], corners[triangle_of_pair], corner_pressures[triangle_of_pair], pair_valid
     )  # each (capacity, num_rays)
-    nearest_t = jax.ops.segment_min(jax.lax.stop_gradient(t), taxel_of_pair, num_segments=num_taxels)
+    segments = {"segment_ids": taxel_of_pair, "num_segments": num_taxels, "indices_are_sorted": True}
+    nearest_t = jax.ops.segment_min(jax.lax.stop_gradient(t), **segments)
     nearest = hit & (t == nearest_t[taxel_of_pair])
-    sums = jax.ops.segment_sum(jnp.where(nearest, pressure, 0.0), taxel_of_pair, num_segments=num_taxels)
-    counts = jax.ops.segment_sum(nearest.astype(jnp.int32), taxel_of_pair, num_segments=num_taxels)
+    sums = jax.ops.segment_sum(jnp.where(nearest, pressure, 0.0), **segments)
+    counts = jax.ops.segment_sum(nearest.astype(jnp.int32), **segments)
     pressures, coverage = _aggregate(sums, counts, weights)
-    needed = jnp.sum(meets)
     return TaxelReadings(pressures, coverage, needed > capacity, needed)
 
 
