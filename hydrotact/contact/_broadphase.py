@@ -1,10 +1,11 @@
 """Broad phase: which tets and triangles can touch, in fixed-capacity lists.
 
-Candidates are found in two stages, each an axis-aligned-box test compacted with
-`jnp.nonzero(..., size=capacity)`: first the tets (and rigid triangles, or the other
-body's tets) that overlap the intersection of the two bodies' bounding boxes, then
-the pairs among those whose own boxes overlap. Each list reports how many entries it
-needed, so overflow is detected, never silently truncated.
+Candidates are found in stages, each a test compacted into a fixed-capacity list by
+:func:`select` (a prefix sum and one scatter): first the tets (through their
+clusters) and the rigid triangles, or the other body's tets, that overlap the
+intersection of the two bodies' bounding boxes, then the pairs among those (the
+kernels add their own finer tests). Each list reports how many entries it needed,
+so overflow is detected, never silently truncated.
 """
 
 import equinox as eqx
@@ -19,8 +20,8 @@ class Capacity(eqx.Module):
 
     - `tets`: soft tets near the other body (in whole clusters when clustered).
     - `others`: rigid triangles (or the other soft body's tets) near the soft body.
-    - `pairs`: candidate pairs whose boxes overlap (soft-rigid; counted in tet
-      slots, cluster by cluster when clustered).
+    - `pairs`: not used by the current kernels (kept so existing code keeps
+      working; `needed[2]` reads 0 except for brute force).
     - `polygons`: the contact polygons, the size of the returned surface: the
       candidate pairs that survive the separating-plane tests (soft-rigid), the cut
       tets (half-space), the overlapping tet pairs (soft-soft).
@@ -28,21 +29,21 @@ class Capacity(eqx.Module):
 
     tets: int = eqx.field(static=True, default=256)
     others: int = eqx.field(static=True, default=256)
-    pairs: int = eqx.field(static=True, default=4096)
+    pairs: int = eqx.field(static=True, default=1024)
     polygons: int = eqx.field(static=True, default=1024)
 
     def grown_to(self, needed) -> "Capacity":
         """The smallest capacity at least this one and `needed` (tets, others, pairs,
-        polygons), each buffer rounded up to 4, 5, 6 or 7 times a power of two (at
-        most 25 % more than needed, and few distinct sizes to compile)."""
+        polygons), each buffer rounded up to 8 to 15 times a power of two (at most
+        12.5 % more than needed, and few distinct sizes to compile)."""
 
         def fit(current, need):
             if need <= current:
                 return current
             scale = 1
-            while 7 * scale < need:
+            while 15 * scale < need:
                 scale *= 2
-            return max(current, next(m * scale for m in (4, 5, 6, 7) if m * scale >= need))
+            return max(current, next(m * scale for m in range(8, 16) if m * scale >= need))
 
         return Capacity(*(fit(current, need) for current, need in zip(self.sizes, needed)))
 
@@ -140,11 +141,6 @@ def _like(vector, boxes):
     return jnp.reshape(vector, (1,) * (boxes.ndim - 1) + (3,))
 
 
-def box_meets_region(region_lo, region_hi):
-    """A box test for :func:`select_clustered_tets`: overlap with an axis-aligned region."""
-    return lambda lo, hi: boxes_overlap(lo, hi, _like(region_lo, lo), _like(region_hi, lo))
-
-
 def box_meets_plane(point, normal):
     """A box test for :func:`select_clustered_tets`: the plane passes through the box."""
 
@@ -155,28 +151,6 @@ def box_meets_plane(point, normal):
         return jnp.abs(distance) <= reach
 
     return meets
-
-
-def select_clustered_tets(clusters: TetClusters, tet_lo, tet_hi, meets, capacity: int):
-    """Tets whose boxes pass the test `meets(lo, hi)`, found through the clusters.
-
-    **Returns:** (tet indices (capacity,) with -1 for none, validity mask, slots
-    needed): capacity is rounded down to whole clusters; `needed` counts the slots of
-    every cluster that overlaps the region.
-    """
-    members = jnp.asarray(clusters.members)
-    safe = jnp.maximum(members, 0)
-    real = members >= 0
-    big = jnp.asarray(jnp.inf, tet_lo.dtype)
-    cluster_lo = jnp.min(jnp.where(real[..., None], tet_lo[safe], big), axis=1)
-    cluster_hi = jnp.max(jnp.where(real[..., None], tet_hi[safe], -big), axis=1)
-    num_slots = max(1, capacity // clusters.cluster_size)
-    hit, hit_valid, num_hit = select(meets(cluster_lo, cluster_hi), num_slots)
-    candidates = members[jnp.maximum(hit, 0)]  # (num_slots, cluster_size)
-    valid = hit_valid[:, None] & (candidates >= 0)
-    candidates = jnp.maximum(candidates, 0)
-    valid = valid & meets(tet_lo[candidates], tet_hi[candidates])
-    return jnp.where(valid, candidates, -1).reshape(-1), valid.reshape(-1), num_hit * clusters.cluster_size
 
 
 def calc_cluster_boxes(clusters: TetClusters, tet_points):

@@ -51,31 +51,6 @@ def _marching_tets_table() -> np.ndarray:
 MARCHING_TETS = _marching_tets_table()
 
 
-def slice_tet_marching(tet_vertices, tet_values, heights, push):
-    """The section of one tet where `heights` (signed, per vertex) vanish: polygon
-    vertices (capacity, 3) wound counter-clockwise about `push`, the linearly
-    interpolated `tet_values` there, and the vertex count (0, 3 or 4)."""
-    case = jnp.sum(jnp.where(heights > 0.0, jnp.array([1, 2, 4, 8]), 0))
-    edges = jnp.asarray(MARCHING_TETS)[case]
-    used = edges >= 0
-    ends = jnp.asarray(TET_EDGES)[jnp.maximum(edges, 0)]
-    h0, h1 = heights[ends[:, 0]], heights[ends[:, 1]]
-    denominator = h0 - h1
-    t = jnp.where(used & (denominator != 0.0), h0 / jnp.where(denominator != 0.0, denominator, 1.0), 0.0)
-    points = tet_vertices[ends[:, 0]] + t[:, None] * (tet_vertices[ends[:, 1]] - tet_vertices[ends[:, 0]])
-    values = tet_values[ends[:, 0]] + t * (tet_values[ends[:, 1]] - tet_values[ends[:, 0]])
-    count = jnp.sum(used)
-    # Wind counter-clockwise about push: reverse the cycle when it runs the other way.
-    orientation = jnp.dot(jnp.cross(points[1] - points[0], points[2] - points[0]), push)
-    reverse = jnp.where(count == 4, jnp.array([0, 3, 2, 1]), jnp.array([0, 2, 1, 3]))
-    order = jnp.where(orientation < 0.0, reverse, jnp.arange(4))
-    points, values = points[order], values[order]
-    pad = POLYGON_CAPACITY - 4
-    points = jnp.concatenate([jnp.where(used[order][:, None], points, 0.0), jnp.zeros((pad, 3), points.dtype)])
-    values = jnp.concatenate([jnp.where(used[order], values, 0.0), jnp.zeros(pad, values.dtype)])
-    return points, values, count
-
-
 def plane_square(point, normal, centre, half_size):
     """A square in the plane (point, normal) centred on `centre`'s projection, wound
     counter-clockwise about `normal`, in a (capacity, 3) polygon buffer."""
@@ -99,10 +74,12 @@ def slice_tet(tet_vertices, point, normal):
 
 
 def slice_tets_marching_columns(tet_vertices, tet_values, heights, push):
-    """:func:`slice_tet_marching` for P tets at once, in column layout (see
-    `_polygon.py`): tet_vertices (3, 4, P), tet_values and heights (4, P), push (3,).
-    Every crossing is computed on all six edges, then each polygon slot selects its
-    edge from the case table: no per-vertex gathers.
+    """The sections of P tets where `heights` (signed, per vertex) vanish, in column
+    layout (see `_polygon.py`): tet_vertices (3, 4, P), tet_values and heights (4,
+    P), push (3,). Polygons wind counter-clockwise about `push`; `tet_values` are
+    interpolated linearly along the crossed edges. Every crossing is computed on all
+    six edges, then each polygon slot selects its edge from the case table: no
+    per-vertex gathers.
 
     **Returns:** (vertices (3, 4, P), values (4, P), counts (P,)).
     """

@@ -7,7 +7,6 @@ and vmapped, and stays finite (with finite gradients) for empty, degenerate and
 grazing polygons.
 """
 
-import jax
 import jax.numpy as jnp
 
 from .._math import safe_div
@@ -87,8 +86,6 @@ def calc_polygon_integrals(vertices, count, pressures, normal):
     pressure_moment = jnp.sum(areas[:, None] * weighted, axis=0) / 12.0
     return area, force, first_moment, pressure_moment
 
-
-batched_clip_by_tet = jax.vmap(clip_polygon_by_tet_faces)
 
 
 # Column layout: many polygons at once, the polygon index last, so that every step is

@@ -12,14 +12,7 @@ import jax.numpy as jnp
 
 from ..field import PressureField
 from ._broadphase import Capacity, TetClusters, boxes_overlap, calc_boxes, calc_cluster_boxes, select
-from ._polygon import (
-    calc_polygon_integrals,
-    calc_polygon_integrals_columns,
-    calc_tet_face_planes,
-    clip_polygon_by_tet_faces,
-    clip_polygon_by_tet_faces_columns,
-    to_polygon_rows,
-)
+from ._polygon import calc_polygon_integrals_columns, calc_tet_face_planes, clip_polygon_by_tet_faces_columns, to_polygon_rows
 from ._pose import Pose
 from ._rigid import RigidSurface
 from ._surface import POLYGON_CAPACITY, ContactSurface, assemble_surface
@@ -44,15 +37,6 @@ def is_normal_along_gradient(normal, gradient):
     return jnp.dot(normal, gradient) >= jnp.cos(5.0 * jnp.pi / 8.0) * gradient_norm
 
 
-def _polygon_from_pair(tet_vertices, triangle, normal, offset, gradient):
-    """One pair, row layout (the reference the column kernel below reproduces)."""
-    vertices = jnp.zeros((POLYGON_CAPACITY, 3), triangle.dtype).at[:3].set(triangle)
-    vertices, count = clip_polygon_by_tet_faces(vertices, jnp.asarray(3), tet_vertices)
-    pressures = offset + vertices @ gradient
-    area, integral, first_moment, pressure_moment = calc_polygon_integrals(vertices, count, pressures, normal)
-    return vertices, pressures, count, area, integral, first_moment, pressure_moment
-
-
 # Separation tests cull a pair only when it is separated by more than this fraction of
 # the coordinates' magnitude (a picometre at centimetre scale), far above round-off:
 # a culled pair is one whose clipped polygon would have been empty.
@@ -63,14 +47,16 @@ SEPARATION_TOLERANCE = 1e-10
 CLUSTER_SEARCH = 4
 
 
-def _tet_columns(tet_points, face_planes):
-    """Per-tet data the pair tests read, one row per quantity (39, num_tets): vertices
-    (12, vertex-major), box lo (3), hi (3), face planes (16, face-major: outward
-    normal, offset), the face normals' lengths (4), the largest coordinate (1)."""
+def _tet_columns(tet_points, face_planes, offsets, gradients):
+    """Per-tet data the pair tests and the clipping read, one row per quantity
+    (43, num_tets): vertices (12, vertex-major), box lo (3), hi (3), face planes (16,
+    face-major: outward normal, offset), the face normals' lengths (4), the largest
+    coordinate (1), the pressure plane (offset 1, gradient 3)."""
     lo, hi = calc_boxes(tet_points)
     lengths = jnp.sqrt(jnp.sum(face_planes[..., :3] ** 2, axis=-1))
     reach = jnp.max(jnp.maximum(jnp.abs(lo), jnp.abs(hi)), axis=-1, keepdims=True)
-    return jnp.concatenate([tet_points.reshape(-1, 12), lo, hi, face_planes.reshape(-1, 16), lengths, reach], axis=1).T
+    rows = [tet_points.reshape(-1, 12), lo, hi, face_planes.reshape(-1, 16), lengths, reach, offsets[:, None], gradients]
+    return jnp.concatenate(rows, axis=1).T
 
 
 def _triangle_columns(triangles, normals):
@@ -91,7 +77,7 @@ def _triangle_columns(triangles, normals):
 
 
 def _pairs_may_meet(tet, triangle):
-    """Which of S tets and T triangles may meet, as a dense (S, T) mask (`tet` (39, S)
+    """Which of S tets and T triangles may meet, as a dense (S, T) mask (`tet` (43, S)
     from `_tet_columns`, `triangle` (35, T) from `_triangle_columns`).
 
     A pair is kept when the boxes overlap, the tet straddles the triangle's plane, and
@@ -168,6 +154,9 @@ def calc_soft_rigid_surface(
     triangle_normals = triangle_normals / norms
     tet_points = field.vertices[field.tets]
     face_planes = calc_tet_face_planes(tet_points)  # (num_tets, 4, 4)
+    offsets, gradients = calc_tet_pressure_planes(field)
+    tet_rows = _tet_columns(tet_points, face_planes, offsets, gradients).T  # (num_tets, 43)
+    triangle_columns = _triangle_columns(triangles, triangle_normals)  # (35, num_triangles)
 
     if brute_force:
         num_tets, num_tris = tet_points.shape[0], triangles.shape[0]
@@ -176,13 +165,12 @@ def calc_soft_rigid_surface(
         pair_valid = jnp.ones(tet_index.shape, dtype=bool)
         needed = jnp.array([num_tets, num_tris, tet_index.shape[0], tet_index.shape[0]])
         overflow = jnp.asarray(False)
+        pair_tets, pair_triangles = tet_rows[tet_index].T, triangle_columns[:, tri_index]
     else:
         if clusters is None:  # every tet its own cluster
             clusters = TetClusters(members=jnp.arange(tet_points.shape[0], dtype=jnp.int32)[:, None])
         members = jnp.asarray(clusters.members)
         cluster_size = clusters.cluster_size
-        tet_rows = _tet_columns(tet_points, face_planes).T  # (num_tets, 39)
-        triangle_columns = _triangle_columns(triangles, triangle_normals)
         cluster_lo, cluster_hi = calc_cluster_boxes(clusters, tet_points)
         tri_lo, tri_hi = triangle_columns[9:12].T, triangle_columns[12:15].T
         region_lo = jnp.maximum(jnp.min(cluster_lo, axis=0), jnp.min(tri_lo, axis=0))
@@ -196,15 +184,18 @@ def calc_soft_rigid_surface(
         near_mask = (candidates >= 0) & boxes_overlap(candidate_rows[:, 12:15], candidate_rows[:, 15:18], region_lo[None], region_hi[None])
         near, near_valid, num_near = select(near_mask, capacity.tets)
         near = jnp.maximum(near, 0)
-        near_tets = safe_candidates[near]
+        near_tets, near_rows = safe_candidates[near], candidate_rows[near]
         tris, tris_valid, num_tris = select(boxes_overlap(tri_lo, tri_hi, region_lo[None], region_hi[None]), capacity.others)
         tris = jnp.maximum(tris, 0)
+        tri_rows = triangle_columns[:, tris].T
         # Every near tet against every near triangle, at once; then the survivors.
-        may_meet = _pairs_may_meet(candidate_rows[near].T, triangle_columns[:, tris])
+        may_meet = _pairs_may_meet(near_rows.T, tri_rows.T)
         may_meet = may_meet & near_valid[:, None] & tris_valid[None, :]
         chosen, pair_valid, num_polygons = select(may_meet, capacity.polygons)
         chosen = jnp.maximum(chosen, 0)
-        tet_index, tri_index = near_tets[chosen // tris.shape[0]], tris[chosen % tris.shape[0]]
+        i, j = chosen // tris.shape[0], chosen % tris.shape[0]
+        tet_index, tri_index = near_tets[i], tris[j]
+        pair_tets, pair_triangles = near_rows[i].T, tri_rows[j].T  # gathers from the small near lists
         search_slots = num_cluster_slots * cluster_size
         needed = jnp.array(
             [jnp.maximum(num_near, -(-num_hit * cluster_size // CLUSTER_SEARCH)), num_tris, 0, num_polygons]
@@ -216,15 +207,15 @@ def calc_soft_rigid_surface(
             | (num_polygons > capacity.polygons)
         )
 
-    offsets, gradients = calc_tet_pressure_planes(field)
-    normals = triangle_normals[tri_index]
-    vertices, counts = clip_polygon_by_tet_faces_columns(
-        jnp.transpose(triangles[tri_index], (2, 1, 0)), jnp.full(tri_index.shape, 3), jnp.transpose(face_planes[tet_index], (1, 2, 0))
-    )
-    pressures = offsets[tet_index][None] + jnp.sum(vertices * gradients[tet_index].T[:, None], axis=0)
+    num_polygons_slots = tet_index.shape[0]
+    normals = pair_triangles[15:18]  # (3, P)
+    corners = jnp.transpose(pair_triangles[:9].reshape(3, 3, num_polygons_slots), (1, 0, 2))  # (3 coordinates, 3 corners, P)
+    vertices, counts = clip_polygon_by_tet_faces_columns(corners, jnp.full(tri_index.shape, 3), pair_tets[18:34].reshape(4, 4, -1))
+    pair_gradients = pair_tets[40:43]
+    pressures = pair_tets[39][None] + jnp.sum(vertices * pair_gradients[:, None], axis=0)
     pressures = jnp.where(jnp.arange(vertices.shape[1])[:, None] < counts[None], pressures, 0.0)
-    area, integral, first_moment, pressure_moment = calc_polygon_integrals_columns(vertices, counts, pressures, normals.T)
+    area, integral, first_moment, pressure_moment = calc_polygon_integrals_columns(vertices, counts, pressures, normals)
     vertices, pressures = to_polygon_rows(vertices, pressures, POLYGON_CAPACITY)
     polygon = (vertices, pressures, counts, area, integral, first_moment.T, pressure_moment.T)
-    keep = jax.vmap(is_normal_along_gradient)(normals, gradients[tet_index])
-    return assemble_surface(polygon, normals, pair_valid, keep, tet_index, tri_index, overflow, needed)
+    keep = jax.vmap(is_normal_along_gradient)(normals.T, pair_gradients.T)
+    return assemble_surface(polygon, normals.T, pair_valid, keep, tet_index, tri_index, overflow, needed)
