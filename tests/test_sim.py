@@ -106,7 +106,7 @@ def test_radial_press_on_the_sphere_recovers_its_angles_and_normal(sphere_model,
 def test_buffers_grow_until_nothing_overflows(pad_model):
     probe = make_cylinder_probe(2e-3)
     trajectory = _pad_trajectory()
-    tiny = SimCapacity(contact=Capacity(16, 16, 32), taxel_pairs=16)
+    tiny = SimCapacity(contact=Capacity(16, 16, 32, 32), taxel_pairs=16)
     grown = simulate(pad_model, make_material(1e6), probe, trajectory, capacity=tiny)
     reference = simulate(pad_model, make_material(1e6), probe, trajectory)
     np.testing.assert_allclose(grown.taxel_pressures, reference.taxel_pressures, rtol=1e-13, atol=1e-9)
