@@ -25,3 +25,14 @@ def describe_machine() -> dict:
         "device": getattr(device, "device_kind", str(device)),
         "python": platform.python_version(),
     }
+
+
+def write_results(name: str, machine: dict, rows: list) -> "Path":
+    """Write benchmarks/results/NAME-BACKEND.json ({machine, rows}) and return its path."""
+    import json
+    from pathlib import Path
+
+    out = Path(__file__).parent / "results" / f"{name}-{machine['jax_backend']}.json"
+    out.parent.mkdir(exist_ok=True)
+    out.write_text(json.dumps({"machine": machine, "rows": rows}, indent=2) + "\n")
+    return out

@@ -15,7 +15,6 @@ Run: `.venv/bin/python benchmarks/contact.py [--batches 1 64 4096]`.
 """
 
 import argparse
-import json
 import statistics
 import sys
 import tempfile
@@ -28,7 +27,7 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from _machine import describe_machine  # noqa: E402
+from _machine import describe_machine, write_results  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "tests"))
 from drake_reference import DrakeScene  # noqa: E402
@@ -149,10 +148,7 @@ def main():
                     f"| {case} | {batch} | {row['ours_surfaces_per_s']:,.0f} | {row['drake_surfaces_per_s']:,.0f} | {row['ratio']:.2f} |",
                     flush=True,
                 )
-    out = Path(__file__).parent / "results" / f"contact-{machine['jax_backend']}.json"
-    out.parent.mkdir(exist_ok=True)
-    out.write_text(json.dumps({"machine": machine, "rows": rows}, indent=2) + "\n")
-    print(f"written: {out}")
+    print(f"written: {write_results('contact', machine, rows)}")
 
 
 if __name__ == "__main__":

@@ -17,10 +17,8 @@ Timings are medians of repeats after compilation. Run:
 """
 
 import argparse
-import json
 import statistics
 import time
-from pathlib import Path
 
 import jax
 
@@ -28,7 +26,7 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from _machine import describe_machine  # noqa: E402
+from _machine import describe_machine, write_results  # noqa: E402
 
 from hydrotact.contact import HalfSpace, calc_contact_surface, compute_contact_surface, make_cylinder_probe, make_pose  # noqa: E402
 from hydrotact.sim import SimCapacity, make_sensor_model  # noqa: E402
@@ -126,10 +124,7 @@ def main():
                 f"| {row['case']} | {rays} | {batch} | {rate:,.1f} | {brute_rate:,.2f} | {rate / brute_rate:,.1f} | {contact_rate:,.1f} | {difference:.1e} |",
                 flush=True,
             )
-    out = Path(__file__).parent / "results" / f"taxel-{machine['jax_backend']}.json"
-    out.parent.mkdir(exist_ok=True)
-    out.write_text(json.dumps({"machine": machine, "rows": rows}, indent=2) + "\n")
-    print(f"written: {out}")
+    print(f"written: {write_results('taxel', machine, rows)}")
 
 
 if __name__ == "__main__":
