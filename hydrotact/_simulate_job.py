@@ -108,6 +108,8 @@ def run_simulate(sensor: str, probe_spec: str, trajectory_path, output, *, modul
     output = Path(output)
     if output.suffix.lower() != ".parquet":
         raise HydrotactError(f"{output}: the log is written as Parquet; name it *.parquet")
+    if png is not None and Path(png).suffix.lower() != ".png":
+        raise HydrotactError(f"{png}: the plot is written as PNG; name it *.png")
     material = make_material(modulus)
     spec = load_sensor(sensor)
     probe = parse_probe(probe_spec)

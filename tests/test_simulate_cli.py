@@ -172,6 +172,7 @@ BAD_INPUTS = [
     ("missing-file", None, [], ["traj.csv", "no such trajectory file"]),
     ("binary-file", b"\x89PNG\r\n\x1a\n\x00\xff\xfe", [], ["traj.csv"]),
     ("output-not-parquet", "time,x,y,z\n0,0,0,4.5\n", ["-o", "{tmp}/log.csv"], ["log.csv", "*.parquet"]),
+    ("png-not-png", "time,x,y,z\n0,0,0,4.5\n", ["--png", "{tmp}/plot.xyz"], ["plot.xyz", "*.png"]),
     ("unknown-sensor", "time,x,y,z\n0,0,0,4.5\n", ["--sensor", "pad6x6"], ["pad6x6"]),
     ("bad-probe", "time,x,y,z\n0,0,0,4.5\n", ["--probe", "cone:r=2mm"], ["--probe", "cone:r=2mm"]),
     ("probe-length", "time,x,y,z\n0,0,0,4.5\n", ["--probe", "cylinder:d=two"], ["--probe"]),
