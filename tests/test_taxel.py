@@ -315,7 +315,11 @@ def test_gradients_match_finite_differences(pad_model):
         response = calc_unit_response(model, probe, make_pose(translation, rotation_vector), capacity)
         return modulus * response.taxel_pressures[12], response.overflow
 
-    f = eqx.filter_jit(lambda *a: reading(*a)[0])
+    value_only = eqx.filter_jit(lambda *a: reading(*a)[0])
+
+    def f(*a):  # every argument as a JAX array: one compilation serves every evaluation
+        return value_only(a[0], *(jnp.asarray(x, jnp.float64) for x in a[1:]))
+
     grad = eqx.filter_jit(jax.grad(lambda *a: reading(*a)[0], argnums=(1, 2, 3, 4)))
     args = (pad_model, jnp.asarray(base), jnp.asarray(rotation), jnp.asarray(2e5), pad_model.layout.positions_S)
     value, overflow = eqx.filter_jit(reading)(*args)
