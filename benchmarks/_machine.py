@@ -36,3 +36,36 @@ def write_results(name: str, machine: dict, rows: list) -> "Path":
     out.parent.mkdir(exist_ok=True)
     out.write_text(json.dumps({"machine": machine, "rows": rows}, indent=2) + "\n")
     return out
+
+
+def time_over_poses(per_pose, translations, chunk: int, repeats: int):
+    """Time `per_pose(translation)` over a batch of translations (count, 3) in one
+    jitted call: vmap over chunks of `chunk` poses, lax.map over the chunks (the last
+    chunk padded with repeats of the last pose). Compiles and runs once first.
+
+    **Returns:** (median seconds per batch, the outputs with the padding removed).
+    """
+    import statistics
+    import time
+
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    count = len(translations)
+    chunk = min(chunk, count)
+    padded = int(np.ceil(count / chunk)) * chunk
+    batch = jnp.asarray(np.concatenate([translations, np.repeat(translations[-1:], padded - count, axis=0)]))
+
+    @jax.jit
+    def run(batch):
+        return jax.lax.map(jax.vmap(per_pose), batch.reshape(-1, chunk, 3))
+
+    result = jax.block_until_ready(run(batch))
+    timings = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        jax.block_until_ready(run(batch))
+        timings.append(time.perf_counter() - start)
+    unpadded = jax.tree_util.tree_map(lambda a: np.asarray(a).reshape(padded, *a.shape[2:])[:count], result)
+    return statistics.median(timings), unpadded

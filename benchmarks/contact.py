@@ -27,7 +27,7 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from _machine import describe_machine, write_results  # noqa: E402
+from _machine import describe_machine, time_over_poses, write_results  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "tests"))
 from drake_reference import DrakeScene  # noqa: E402
@@ -85,23 +85,9 @@ def _ours_seconds_per_batch(field, other, translations, capacity, chunk=CHUNK, r
         force, torque = surface.calc_wrench()
         return force, torque, surface.total_area, surface.overflow
 
-    count = len(translations)
-    chunk = min(chunk, count)
-    padded = int(np.ceil(count / chunk)) * chunk
-    batch = jnp.asarray(np.concatenate([translations, np.repeat(translations[-1:], padded - count, axis=0)]))
-
-    @jax.jit
-    def run(batch):
-        return jax.lax.map(jax.vmap(wrench), batch.reshape(-1, chunk, 3))
-
-    result = jax.block_until_ready(run(batch))
-    assert not bool(jnp.any(result[3])), "capacity too small for the benchmark poses"
-    timings = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        jax.block_until_ready(run(batch))
-        timings.append(time.perf_counter() - start)
-    return statistics.median(timings), np.asarray(result[0]).reshape(-1, 3)[:count]
+    seconds, result = time_over_poses(wrench, translations, chunk, repeats)
+    assert not bool(np.any(result[3])), "capacity too small for the benchmark poses"
+    return seconds, result[0]
 
 
 def main():

@@ -17,8 +17,6 @@ Timings are medians of repeats after compilation. Run:
 """
 
 import argparse
-import statistics
-import time
 
 import jax
 
@@ -26,7 +24,7 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from _machine import describe_machine, write_results  # noqa: E402
+from _machine import describe_machine, time_over_poses, write_results  # noqa: E402
 
 from hydrotact.contact import HalfSpace, calc_contact_surface, compute_contact_surface, make_cylinder_probe, make_pose  # noqa: E402
 from hydrotact.sim import SimCapacity, make_sensor_model  # noqa: E402
@@ -44,22 +42,8 @@ def _poses(sensor, count):
 
 
 def _frames_per_second(frame, translations, repeats):
-    count = len(translations)
-    chunk = min(CHUNK, count)
-    padded = int(np.ceil(count / chunk)) * chunk
-    batch = jnp.asarray(np.concatenate([translations, np.repeat(translations[-1:], padded - count, axis=0)]))
-
-    @jax.jit
-    def run(batch):
-        return jax.lax.map(jax.vmap(frame), batch.reshape(-1, chunk, 3))
-
-    result = jax.block_until_ready(run(batch))
-    timings = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        jax.block_until_ready(run(batch))
-        timings.append(time.perf_counter() - start)
-    return count / statistics.median(timings), result
+    seconds, result = time_over_poses(frame, translations, CHUNK, repeats)
+    return len(translations) / seconds, result
 
 
 def main():
