@@ -18,7 +18,7 @@ from . import __version__
 from ._errors import HydrotactError
 from ._files import atomic_path, digest
 from .data import BarometerLog, write_log
-from .sim import calc_samples, compute_unit_responses, make_material, make_sensor_model, read_trajectory
+from .sim import UnitResponse, compute_unit_responses, make_material, make_sensor_model, read_trajectory, scale_unit_responses
 
 BLOCK = 512
 
@@ -99,11 +99,8 @@ def samples_to_log(spec, samples, trajectory_translations, rotation_vectors, met
 def run_simulate(sensor: str, probe_spec: str, trajectory_path, output, *, modulus=1e6, field="laplace", num_rays=64, units="m", png=None, progress=True) -> dict:
     """Simulate the sensor along the trajectory file and write the log (and plot).
     Returns a report dict."""
-    import jax.numpy as jnp
-
     from ._contact_job import parse_probe
     from .sensors import load_sensor
-    from .sim import Trajectory
 
     output = Path(output)
     if output.suffix.lower() != ".parquet":
@@ -113,17 +110,14 @@ def run_simulate(sensor: str, probe_spec: str, trajectory_path, output, *, modul
     material = make_material(modulus)
     spec = load_sensor(sensor)
     probe = parse_probe(probe_spec)
-    trajectory: Trajectory = read_trajectory(trajectory_path, units=units)
+    trajectory = read_trajectory(trajectory_path, units=units)
     model = make_sensor_model(spec, field_kind=field, num_rays=num_rays)
     translations = np.asarray(trajectory.X_SR.translation)
     rotations = np.asarray(trajectory.rotation_vectors)
     key = _resume_key(__version__, spec.name, json.dumps(spec.to_json(), sort_keys=True), probe_spec, field, num_rays, np.asarray(trajectory.times), translations, rotations)
     partial = output.with_name(f".{output.name}.partial.npz")
-    unit = compute_responses_resumably(model, probe, trajectory, partial, key, progress)
-    from .sim import UnitResponse
-
-    unit = UnitResponse(**{name: jnp.asarray(value) for name, value in unit.items()})
-    samples = jax.tree_util.tree_map(np.asarray, calc_samples(model, material, trajectory.times, unit))
+    unit = UnitResponse(**compute_responses_resumably(model, probe, trajectory, partial, key, progress))
+    samples = scale_unit_responses(model, material, trajectory.times, unit)
     extra = {"probe": probe_spec, "material": {"modulus_Pa": float(modulus)}, "field": field, "num_rays": int(num_rays)}
     steps = np.diff(np.asarray(trajectory.times))
     if len(steps):

@@ -18,6 +18,7 @@ from ._simulate import (
     calc_unit_response as calc_unit_response,
     compute_unit_responses as compute_unit_responses,
     grown_sim_capacity as grown_sim_capacity,
+    scale_unit_responses as scale_unit_responses,
     simulate as simulate,
 )
 from ._trajectory import Trajectory as Trajectory, make_trajectory as make_trajectory, read_trajectory as read_trajectory

@@ -209,5 +209,10 @@ def simulate(model: SensorModel, material: Material, probe, trajectory: Trajecto
     """Simulate the sensor along a probe trajectory (host entry point: chunks,
     buffer growth, optional progress bar). **Returns:** Samples (NumPy-backed)."""
     unit, _ = compute_unit_responses(model, probe, trajectory.X_SR, capacity, progress=progress)
+    return scale_unit_responses(model, material, trajectory.times, unit)
+
+
+def scale_unit_responses(model: SensorModel, material: Material, times, unit: UnitResponse) -> Samples:
+    """:func:`calc_samples` on host (NumPy) unit responses; **Returns:** NumPy-backed Samples."""
     unit = jax.tree_util.tree_map(jnp.asarray, unit)
-    return jax.tree_util.tree_map(np.asarray, calc_samples(model, material, trajectory.times, unit))
+    return jax.tree_util.tree_map(np.asarray, calc_samples(model, material, jnp.asarray(times), unit))
