@@ -18,7 +18,7 @@ def _metadata(**changes):
     metadata = {
         "format": "hydrotact.barometer_log",
         "version": 1,
-        "sensor": "pad5x5",
+        "sensor": "bench3",  # names no spec: no channel-count check (tests/test_log_formats.py has those)
         "source": "simulated",
         "pressure": "elastic",
         "channels": list(CHANNELS),
@@ -104,11 +104,11 @@ def test_known_columns_have_units_and_descriptions():
     [
         ({"time": None}, ["missing column 'time'"]),
         ({"b01": None}, ["missing column 'b01'"]),
-        ({"b02": _with("b02", 2, np.nan)}, ["'b02'", "row 3", "not a finite number"]),
-        ({"fx": _with("fx", 0, np.nan)}, ["'fx'", "row 1", "not a finite number"]),
+        ({"b02": _with("b02", 2, np.nan)}, ["'b02'", "row 3", "missing value (NaN or blank)"]),
+        ({"fx": _with("fx", 0, np.nan)}, ["'fx'", "row 1", "missing value"]),
         ({"b00": _with("b00", 4, np.inf)}, ["'b00'", "row 5", "not a finite number"]),
         ({"theta": _with("theta", 1, -np.inf)}, ["'theta'", "row 2", "not a finite number"]),
-        ({"time": _with("time", 3, np.nan)}, ["'time'", "row 4", "not a finite number"]),
+        ({"time": _with("time", 3, np.nan)}, ["'time'", "row 4", "missing value"]),
         ({"time": np.array([0.0, 0.01, 0.02, 0.015, 0.04])}, ["'time'", "row 4", "goes back"]),
         ({"time": np.array([0.0, 0.01, 0.01, 0.03, 0.04])}, ["'time'", "row 3", "repeats"]),
         ({"pressure_b00": np.zeros(NUM)}, ["unknown column 'pressure_b00'"]),
@@ -215,7 +215,7 @@ def test_read_checks_the_file(tmp_path):
     columns = _columns()
     columns["b01"] = _with("b01", 3, np.nan)
     _write_raw(path, columns, _metadata())
-    with pytest.raises(HydrotactError, match=r"bad\.parquet: column 'b01', row 4: nan is not a finite number"):
+    with pytest.raises(HydrotactError, match=r"bad\.parquet: column 'b01', row 4: missing value \(NaN or blank\)"):
         read_log(path)
 
     columns = _columns()

@@ -1,9 +1,19 @@
-"""Logs and datasets: barometer log I/O with validation."""
+"""Logs and datasets: barometer log I/O (Parquet, CSV, users' layouts through a column
+mapping) with validation, tare calibration, and material documents."""
 
 from ._log import (
     BarometerLog as BarometerLog,
+    LogWarning as LogWarning,
     check_log as check_log,
     known_columns as known_columns,
     read_log as read_log,
+    read_table as read_table,
     write_log as write_log,
+)
+from ._mapping import (
+    UNITS as UNITS,
+    ColumnMapping as ColumnMapping,
+    apply_mapping as apply_mapping,
+    check_mapping as check_mapping,
+    load_mapping as load_mapping,
 )

@@ -1,23 +1,45 @@
 """Barometer logs: a table of samples (time, one column per barometer, optional probe,
-wrench and label columns) with a metadata document, in Parquet.
+wrench and label columns) with a metadata document, in Parquet or CSV.
 
 The contract is `data_schemas/barometer_log.schema.json`: the metadata is validated
-against it and stored in the Parquet file's key-value metadata under `hydrotact`; the
-known optional columns and their units are listed in its `$defs/columns`. Every number
-is SI. Reading checks what a fit would trip over and names the file, column and row:
-missing columns, non-finite values, times that do not strictly increase.
+against it and stored in the Parquet file's key-value metadata under `hydrotact`, or,
+for a CSV log `NAME.csv`, in the JSON document `NAME.json` beside it. The known optional
+columns and their units are listed in its `$defs/columns`. Every number is SI. A table
+of the user's own layout is read through a column mapping (see `_mapping.py`).
+
+Reading checks what a fit would trip over and names the file, column and (1-based) row:
+missing columns, runs of missing values, non-finite values, times that do not strictly
+increase, a channel count other than the sensor's, pressures no barometer reads. Uneven
+sampling (jitter, gaps, a rate other than the declared one) is a :class:`LogWarning`
+with the figures.
 """
 
-from dataclasses import dataclass
+import functools
+import json
+import warnings
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from .._errors import HydrotactError
 from .._files import atomic_path
-from .._schemas import load_schema, parse_json, validate
+from .._schemas import load_schema, parse_json, read_json, validate
 
 METADATA_KEY = b"hydrotact"
+SUFFIXES = (".parquet", ".csv")
+# Sampling figures that draw a warning: relative std of the steps, gap size in median
+# steps, relative difference between the declared and the measured rate.
+JITTER_LIMIT = 0.05
+GAP_STEPS = 3.0
+RATE_LIMIT = 0.02
+# Tared or elastic pressures beyond this many pascals are no barometer reading (10 MPa).
+PRESSURE_LIMIT_PA = 1e7
+
+
+class LogWarning(UserWarning):
+    """A log that reads but may mislead a fit: uneven sampling, gaps, a rate other
+    than the declared one. The message gives the figures."""
 
 
 def known_columns() -> dict:
@@ -28,10 +50,13 @@ def known_columns() -> dict:
 @dataclass(frozen=True)
 class BarometerLog:
     """A log in memory: `metadata` (the schema's document) and `columns` (name ->
-    1-D NumPy array, all of one length), SI units."""
+    1-D NumPy array, all of one length), SI units. `source_columns` says, for a log
+    read through a column mapping, which column of the user's file each log column
+    came from (messages name that column too)."""
 
     metadata: dict
     columns: dict
+    source_columns: dict = field(default_factory=dict, compare=False)
 
     @property
     def times(self) -> np.ndarray:
@@ -46,9 +71,121 @@ class BarometerLog:
     def num_samples(self) -> int:
         return len(self.columns["time"])
 
+    def describe_column(self, name: str) -> str:
+        """`'b00'`, or `'b00' (file column 'Sensor_0')` for a mapped log."""
+        origin = self.source_columns.get(name)
+        return f"{name!r}" if origin is None or origin == name else f"{name!r} (file column {origin!r})"
 
-def check_log(log: BarometerLog, source: str) -> None:
-    """Validate metadata and columns; one HydrotactError naming file, column and row."""
+
+@functools.cache
+def _cached_spec(sensor: str, modified: float | None):
+    from ..sensors import load_sensor
+
+    return load_sensor(sensor)
+
+
+def sensor_spec(sensor: str, source: str | None = None):
+    """The sensor spec a log's `sensor` names (a built-in name or an existing sensor
+    JSON file), or None when it names neither (a log may come from elsewhere)."""
+    from ..sensors import BUILTIN_SENSORS
+
+    if sensor in BUILTIN_SENSORS:
+        return _cached_spec(sensor, None)
+    path = Path(sensor)
+    if not path.is_file():
+        return None
+    try:
+        return _cached_spec(str(path), path.stat().st_mtime)
+    except HydrotactError as error:
+        raise HydrotactError(f"{source}: sensor: {error}") from None
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) index ranges where `mask` is true."""
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(), strict=True))
+
+
+def _check_values(log: BarometerLog, name: str, values: np.ndarray, source: str, known: dict) -> None:
+    label = log.describe_column(name)
+    floats = values.astype(np.float64)
+    missing = np.isnan(floats)
+    if not known.get(name, {}).get("nan_allowed") and missing.any():
+        runs = _runs(missing)
+        start, stop = runs[0]
+        where = f"row {start + 1}: missing value" if stop - start == 1 else f"rows {start + 1}-{stop}: {stop - start} missing values"
+        more = f"; {len(runs)} runs, {int(missing.sum())} missing values in all" if len(runs) > 1 else ""
+        raise HydrotactError(f"{source}: column {label}, {where} (NaN or blank){more}")
+    infinite = np.isinf(floats)
+    if infinite.any():
+        row = int(np.flatnonzero(infinite)[0])
+        raise HydrotactError(f"{source}: column {label}, row {row + 1}: {values[row]} is not a finite number")
+
+
+def _check_pressures(log: BarometerLog, source: str) -> None:
+    reference = log.metadata["pressure"]
+    for name in log.metadata["channels"]:
+        values = np.asarray(log.columns[name], dtype=np.float64)
+        label = log.describe_column(name)
+        if reference == "absolute" and np.any(values <= 0.0):
+            row = int(np.flatnonzero(values <= 0.0)[0])
+            raise HydrotactError(f"{source}: column {label}, row {row + 1}: absolute pressure {values[row]:g} Pa is not positive (is the unit or the pressure reference right?)")
+        if np.any(np.abs(values) > PRESSURE_LIMIT_PA):
+            row = int(np.flatnonzero(np.abs(values) > PRESSURE_LIMIT_PA)[0])
+            raise HydrotactError(f"{source}: column {label}, row {row + 1}: {values[row]:g} Pa is beyond the {PRESSURE_LIMIT_PA:g} Pa no barometer reads (is the unit right?)")
+
+
+def _warn_sampling(log: BarometerLog, source: str) -> None:
+    """LogWarnings for jitter, gaps and a declared rate the steps do not show."""
+    times = np.asarray(log.columns["time"], dtype=np.float64)
+    if len(times) < 3:
+        return
+    steps = np.diff(times)
+    median = float(np.median(steps))
+    label = log.describe_column("time")
+    regular = steps[steps <= GAP_STEPS * median]
+    jitter = float(np.std(regular) / median)
+    if jitter > JITTER_LIMIT:
+        warnings.warn(LogWarning(f"{source}: column {label}: uneven sampling: median step {median:.4g} s, relative std of the steps {jitter:.1%} (over {JITTER_LIMIT:.0%})"), stacklevel=3)
+    gaps = np.flatnonzero(steps > GAP_STEPS * median)
+    if len(gaps):
+        longest = int(gaps[np.argmax(steps[gaps])])
+        warnings.warn(
+            LogWarning(
+                f"{source}: column {label}: {len(gaps)} gap{'s' if len(gaps) > 1 else ''} over {GAP_STEPS:g}x the median step ({median:.4g} s), "
+                f"{float(steps[gaps].sum()):.4g} s in all; the longest {float(steps[longest]):.4g} s ({float(steps[longest]) / median:.1f} steps), "
+                f"row {longest + 1} to row {longest + 2} (t = {times[longest]:g} s to {times[longest + 1]:g} s)"
+            ),
+            stacklevel=3,
+        )
+    declared = log.metadata.get("rate_hz")
+    measured = 1.0 / median
+    if declared is not None and abs(measured - declared) > RATE_LIMIT * declared:
+        warnings.warn(
+            LogWarning(f"{source}: rate_hz: declared {declared:g} Hz, measured {measured:.4g} Hz from the median step {median:.4g} s ({(measured - declared) / declared:+.1%})"),
+            stacklevel=3,
+        )
+
+
+def check_log(log: BarometerLog, source: str, *, warn: bool = True) -> None:
+    """Validate metadata and columns; one HydrotactError naming file, column and row.
+
+    Checks, in order: the metadata against the schema; that the channel names are not
+    reserved; the columns present (time and every channel; no unknown ones); one length,
+    numeric; no missing values (NaN or blank; reported as the first run of them, rows
+    1-based) except where the schema allows NaN; finite values; strictly increasing
+    time; as many channels as the sensor has taxels (when `sensor` names a built-in
+    sensor or an existing sensor file); absolute pressures above 0 and no channel beyond
+    1e7 Pa. With `warn`, uneven sampling is a :class:`LogWarning` with its figures:
+    the relative std of the steps over 5 %, gaps over 3 median steps, a declared
+    `rate_hz` more than 2 % off the measured one.
+
+    **Arguments:**
+
+    - `log`: the :class:`BarometerLog`.
+    - `source`: the file name messages start with.
+    - `warn`: whether to warn about the sampling (write_log does not).
+    """
     validate(log.metadata, "barometer_log", source)
     known = known_columns()
     channels = log.metadata["channels"]
@@ -68,55 +205,190 @@ def check_log(log: BarometerLog, source: str) -> None:
         if values.ndim != 1 or len(values) != length:
             raise HydrotactError(f"{source}: column {name!r} has {values.shape} values, expected {length}")
         if not (np.issubdtype(values.dtype, np.integer) or np.issubdtype(values.dtype, np.floating) or values.dtype == bool):
-            raise HydrotactError(f"{source}: column {name!r} is not numeric ({values.dtype})")
-        bad = ~np.isfinite(values.astype(np.float64))
-        if known.get(name, {}).get("nan_allowed"):
-            bad &= ~np.isnan(values.astype(np.float64))
-        if bad.any():
-            row = int(np.flatnonzero(bad)[0])
-            raise HydrotactError(f"{source}: column {name!r}, row {row + 1}: {values[row]} is not a finite number")
-    steps = np.diff(np.asarray(log.columns["time"], dtype=np.float64))
+            raise HydrotactError(f"{source}: column {log.describe_column(name)} is not numeric ({values.dtype})")
+        _check_values(log, name, values, source, known)
+    times = np.asarray(log.columns["time"], dtype=np.float64)
+    steps = np.diff(times)
     if np.any(steps <= 0.0):
         row = int(np.flatnonzero(steps <= 0.0)[0]) + 1
         kind = "repeats" if steps[row - 1] == 0.0 else "goes back"
-        raise HydrotactError(f"{source}: column 'time', row {row + 1}: time {kind} ({log.columns['time'][row]:g} s after {log.columns['time'][row - 1]:g} s)")
+        raise HydrotactError(f"{source}: column {log.describe_column('time')}, row {row + 1}: time {kind} ({times[row]:g} s after {times[row - 1]:g} s in row {row})")
+    spec = sensor_spec(log.metadata["sensor"], source)
+    if spec is not None and spec.num_taxels != len(channels):
+        raise HydrotactError(f"{source}: channels: {len(channels)} channel columns, but sensor {log.metadata['sensor']!r} has {spec.num_taxels} taxels")
+    _check_pressures(log, source)
+    if warn:
+        _warn_sampling(log, source)
+
+
+def _suffix(path: Path) -> str:
+    suffix = path.suffix.lower()
+    if suffix not in SUFFIXES:
+        raise HydrotactError(f"{path}: a log is a Parquet or CSV file; name it *.parquet or *.csv")
+    return suffix
+
+
+def metadata_path(path) -> Path:
+    """The metadata document beside a CSV log: `NAME.json` for `NAME.csv`."""
+    return Path(path).with_suffix(".json")
 
 
 def write_log(path, log: BarometerLog) -> Path:
-    """Check `log` and write it as Parquet, atomically (an interrupted write leaves
-    any old file as it was)."""
-    import json
+    """Check `log` and write it, atomically: Parquet (metadata inside) for `*.parquet`,
+    or for `*.csv` the table with a header of the column names and the metadata as
+    `NAME.json` beside it. An interrupted or refused write leaves old files as they were.
 
+    **Arguments:**
+
+    - `path`: the file to write, `*.parquet` or `*.csv`.
+    - `log`: the :class:`BarometerLog` (checked first, without sampling warnings).
+
+    **Returns:** `path`.
+    """
     import pyarrow as pa
+    import pyarrow.csv as pa_csv
     import pyarrow.parquet as pq
 
     path = Path(path)
-    check_log(log, str(path))
+    suffix = _suffix(path)
+    check_log(log, str(path), warn=False)
     table = pa.table({name: np.asarray(values) for name, values in log.columns.items()})
-    table = table.replace_schema_metadata({METADATA_KEY: json.dumps(log.metadata).encode()})
-    with atomic_path(path) as tmp:
-        pq.write_table(table, tmp)
+    if suffix == ".parquet":
+        table = table.replace_schema_metadata({METADATA_KEY: json.dumps(log.metadata).encode()})
+        with atomic_path(path) as tmp:
+            pq.write_table(table, tmp)
+        return path
+    with atomic_path(metadata_path(path)) as tmp_metadata, atomic_path(path) as tmp:
+        tmp_metadata.write_text(json.dumps(log.metadata, indent=2) + "\n", encoding="utf-8")
+        pa_csv.write_csv(table, tmp, pa_csv.WriteOptions(quoting_style="none"))
     return path
 
 
-def read_log(path) -> BarometerLog:
-    """Read and check a Parquet log written by hydrotact (or to its schema)."""
+def _to_numpy(column, name: str, source: str) -> np.ndarray:
+    """A pyarrow column as a NumPy array: nulls (blank cells) become NaN; a text
+    column is an error naming the first cell that is no number."""
     import pyarrow as pa
+
+    if pa.types.is_null(column.type):
+        return np.full(len(column), np.nan)
+    if pa.types.is_string(column.type) or pa.types.is_large_string(column.type):
+        for row, text in enumerate(column.to_pylist()):
+            if text is None:
+                continue
+            try:
+                float(text)
+            except ValueError:
+                raise HydrotactError(f"{source}: column {name!r}, row {row + 1}: {text.strip()!r} is not a number") from None
+        return np.array([np.nan if text is None else float(text) for text in column.to_pylist()])
+    if column.null_count and (pa.types.is_integer(column.type) or pa.types.is_boolean(column.type)):
+        column = column.cast(pa.float64())
+    return column.to_numpy(zero_copy_only=False)
+
+
+def read_table(path, source: str | None = None, *, delimiter: str = ",", skip_rows: int = 0) -> dict:
+    """The columns of a CSV or Parquet file as NumPy arrays (name -> array), read with
+    pyarrow; blank cells are NaN. A CSV needs a header row; names are stripped of
+    surrounding blanks. Errors name the file and the line or column."""
+    import pyarrow as pa
+    import pyarrow.csv as pa_csv
     import pyarrow.parquet as pq
+
+    path = Path(path)
+    source = source or str(path)
+    if not path.is_file():
+        raise HydrotactError(f"{source}: no such log file")
+    if _suffix(path) == ".parquet":
+        try:
+            table = pq.read_table(path)
+        except (pa.ArrowException, OSError) as error:
+            raise HydrotactError(f"{source}: not a readable Parquet file ({str(error).splitlines()[0]})") from None
+    else:
+        invalid = []
+
+        def on_invalid(row):
+            invalid.append(row)
+            return "skip"
+
+        try:
+            table = pa_csv.read_csv(
+                path,
+                read_options=pa_csv.ReadOptions(use_threads=False, skip_rows=skip_rows),
+                parse_options=pa_csv.ParseOptions(delimiter=delimiter, invalid_row_handler=on_invalid),
+            )
+        except (pa.ArrowException, OSError) as error:
+            message = str(error).splitlines()[0].replace("CSV parse error: ", "")
+            raise HydrotactError(f"{source}: not a readable CSV file ({message})") from None
+        if invalid:
+            row = invalid[0]
+            line = f"line {row.number}: " if row.number is not None else ""
+            raise HydrotactError(f"{source}: {line}{row.actual_columns} fields, expected {row.expected_columns} ({row.text[:40]!r})")
+        table = table.rename_columns([name.strip() for name in table.column_names])
+    names = table.column_names
+    for index, name in enumerate(names):
+        if name in names[:index]:
+            raise HydrotactError(f"{source}: column {name!r} appears twice in the header")
+    return {name: _to_numpy(table.column(name), name, source) for name in names}
+
+
+def read_log(path, mapping=None, *, sensor: str | None = None) -> BarometerLog:
+    """Read and check a barometer log.
+
+    Without `mapping`, the file is a hydrotact log: Parquet with its metadata inside,
+    or a CSV whose header holds our column names with the metadata document `NAME.json`
+    beside it. With `mapping` (a column-mapping file or :class:`ColumnMapping`), the
+    file, CSV or Parquet, is of the user's own layout: the mapping picks and converts
+    its columns to SI. The log is then checked (:func:`check_log`): every problem is one
+    :class:`HydrotactError` naming the file, the column and the row; uneven sampling is
+    a :class:`LogWarning`.
+
+    **Arguments:**
+
+    - `path`: `*.parquet` or `*.csv`.
+    - `mapping`: a column mapping for a file of the user's own layout, or None.
+    - `sensor`: the sensor spec (built-in name or JSON path); with a mapping it
+      overrides the mapping's `sensor`; without one it must agree with the log's.
+
+    **Returns:** the :class:`BarometerLog`, SI units.
+    """
+    from ._mapping import ColumnMapping, apply_mapping, load_mapping
 
     path = Path(path)
     source = str(path)
     if not path.is_file():
         raise HydrotactError(f"{source}: no such log file")
+    suffix = _suffix(path)
+    if mapping is not None:
+        mapping = mapping if isinstance(mapping, ColumnMapping) else load_mapping(mapping)
+        columns = read_table(path, source, **mapping.csv_options) if suffix == ".csv" else read_table(path, source)
+        log = apply_mapping(columns, mapping, source, sensor=sensor)
+    elif suffix == ".csv":
+        beside = metadata_path(path)
+        if not beside.is_file():
+            raise HydrotactError(
+                f"{source}: no metadata document {beside.name} beside it; a CSV of your own layout needs a column mapping (--mapping MAPPING.json)"
+            )
+        metadata = read_json(beside)
+        validate(metadata, "barometer_log", str(beside))
+        log = BarometerLog(metadata=metadata, columns=read_table(path, source))
+    else:
+        log = _read_parquet_log(path, source)
+    if mapping is None and sensor is not None and str(sensor) != log.metadata.get("sensor"):
+        raise HydrotactError(f"{source}: sensor: the log is from {log.metadata.get('sensor')!r}, not {str(sensor)!r}")
+    check_log(log, source)
+    return log
+
+
+def _read_parquet_log(path: Path, source: str) -> BarometerLog:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
     try:
         table = pq.read_table(path)
     except (pa.ArrowException, OSError) as error:
         raise HydrotactError(f"{source}: not a readable Parquet file ({str(error).splitlines()[0]})") from None
     raw = (table.schema.metadata or {}).get(METADATA_KEY)
     if raw is None:
-        raise HydrotactError(f"{source}: no hydrotact metadata (key 'hydrotact'); was it written by hydrotact?")
+        raise HydrotactError(f"{source}: no hydrotact metadata (key 'hydrotact'); was it written by hydrotact? For your own layout pass a column mapping (--mapping MAPPING.json)")
     metadata = parse_json(raw.decode("utf-8", errors="replace"), f"{source}: metadata")
     columns = {name: table.column(name).to_numpy(zero_copy_only=False) for name in table.column_names}
-    log = BarometerLog(metadata=metadata, columns=columns)
-    check_log(log, source)
-    return log
+    return BarometerLog(metadata=metadata, columns=columns)
