@@ -17,3 +17,9 @@ from ._mapping import (
     check_mapping as check_mapping,
     load_mapping as load_mapping,
 )
+from ._tare import (
+    estimate_noise as estimate_noise,
+    find_no_load_segments as find_no_load_segments,
+    interpolate_baseline as interpolate_baseline,
+    tare_log as tare_log,
+)
