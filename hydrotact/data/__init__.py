@@ -23,3 +23,10 @@ from ._tare import (
     interpolate_baseline as interpolate_baseline,
     tare_log as tare_log,
 )
+from ._material import (
+    check_material as check_material,
+    make_material_document as make_material_document,
+    parameter_names as parameter_names,
+    read_material as read_material,
+    write_material as write_material,
+)
