@@ -260,7 +260,9 @@ def write_log(path, log: BarometerLog) -> Path:
         return path
     with atomic_path(metadata_path(path)) as tmp_metadata, atomic_path(path) as tmp:
         tmp_metadata.write_text(json.dumps(log.metadata, indent=2) + "\n", encoding="utf-8")
-        pa_csv.write_csv(table, tmp, pa_csv.WriteOptions(quoting_style="none"))
+        with open(tmp, "wb") as handle:  # the header unquoted: column names are identifiers
+            handle.write((",".join(table.column_names) + "\n").encode())
+            pa_csv.write_csv(table, handle, pa_csv.WriteOptions(include_header=False, quoting_style="none"))
     return path
 
 

@@ -68,8 +68,10 @@ def _quiet_runs(channels: np.ndarray, sigma: np.ndarray, window: int, quiet_fact
 
 def _predict(levels: np.ndarray, centres: np.ndarray, keep: list[int], index: int) -> np.ndarray:
     """Run `index`'s level as predicted from the kept runs other than it: linear
-    between its neighbours, linear extrapolation from the two nearest at the ends,
-    the one other's level when only one is left."""
+    between its neighbours; at the ends the higher of the nearest run's level and the
+    linear extrapolation from the two nearest (a held load among those two must not
+    make a no-load run at the end look loaded); the one other's level when only one
+    is left."""
     others = [k for k in keep if k != index]
     if len(others) == 1:
         return levels[others[0]]
@@ -82,7 +84,10 @@ def _predict(levels: np.ndarray, centres: np.ndarray, keep: list[int], index: in
     else:
         low, high = before[-2], before[-1]
     weight = (centres[index] - centres[low]) / (centres[high] - centres[low])
-    return levels[low] + weight * (levels[high] - levels[low])
+    linear = levels[low] + weight * (levels[high] - levels[low])
+    if before and after:
+        return linear
+    return np.maximum(linear, levels[after[0] if after else before[-1]])
 
 
 def _signal_segments(log: BarometerLog, min_duration: float, margin: float, quiet_factor: float, level_factor: float) -> list[tuple[int, int]]:
