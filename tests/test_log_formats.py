@@ -196,6 +196,24 @@ def test_mapping_takes_the_sensors_taxel_names(tmp_path, four_taxel_sensor):
     named = _mapping(channels=[{"column": f"Sensor_{k}", "unit": "Pa", "name": f"p{k}"} for k in range(4)])
     data, mapping = _write_user(tmp_path, named)
     assert read_log(data, mapping, sensor=str(four_taxel_sensor)).metadata["channels"] == ["p0", "p1", "p2", "p3"]
+    # Errors in a mapped log name the log's channel and the file's column.
+    data, mapping = _write_user(tmp_path, text=USER_CSV.replace("101300.5", "0"))
+    with pytest.raises(HydrotactError) as error:
+        read_log(data, mapping, sensor=str(four_taxel_sensor))
+    _one_line(error, "rig.csv: column 't1' (file column 'Sensor_1'), row 1: absolute pressure 0 Pa is not positive")
+
+
+def test_mapped_contact_flag_drives_the_tare(tmp_path):
+    text = "\n".join(["t_ms,p,touch", *(f"{10 * k},{1000.0 + (50.0 if 100 <= k < 200 else 0.0) + 0.01 * k},{int(100 <= k < 200)}" for k in range(300))]) + "\n"
+    mapping = _mapping(
+        time={"column": "t_ms", "unit": "ms"}, channels=[{"column": "p", "unit": "hPa"}], columns={"contact": {"column": "touch", "unit": "1"}}
+    )
+    data, path = _write_user(tmp_path, mapping, text)
+    log = read_log(data, path)
+    assert log.columns["contact"].dtype.kind == "i"
+    tared, baselines = tare_log(log)
+    assert tared.metadata["tare"]["segments_s"] == [[0.0, 0.99], [2.0, 2.99]]
+    np.testing.assert_allclose(tared.columns["p"], np.where(log.columns["contact"] == 1, 5000.0, 0.0), atol=1e-6)
 
 
 def test_mapping_channel_group_units_and_parquet(tmp_path):

@@ -340,8 +340,9 @@ def read_log(path, mapping=None, *, sensor: str | None = None) -> BarometerLog:
     beside it. With `mapping` (a column-mapping file or :class:`ColumnMapping`), the
     file, CSV or Parquet, is of the user's own layout: the mapping picks and converts
     its columns to SI. The log is then checked (:func:`check_log`): every problem is one
-    :class:`HydrotactError` naming the file, the column and the row; uneven sampling is
-    a :class:`LogWarning`.
+    :class:`HydrotactError` naming the file, the column and the row (rows count samples
+    from 1; a CSV's header and blank lines are not counted, a parse error names the
+    file's line instead); uneven sampling is a :class:`LogWarning`.
 
     **Arguments:**
 

@@ -194,10 +194,8 @@ def apply_mapping(table_columns: dict, mapping, source: str, *, sensor: str | No
             raise HydrotactError(f"{source}: column {column!r} is not numeric ({raw.dtype})")
         factor = _factor(entry, kind, mapping.source, path)
         offset = entry.get("offset", 0.0)
-        if name == "contact" and factor == 1.0 and offset == 0.0:
-            values = raw
-        else:
-            values = (raw.astype(np.float64) + offset) * factor
+        # A column needing no conversion keeps its type (an int8 contact flag stays one).
+        values = raw if factor == 1.0 and offset == 0.0 else (raw.astype(np.float64) + offset) * factor
         if kind == "pressure":
             channel_columns.append((column, values))
         else:

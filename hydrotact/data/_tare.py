@@ -17,6 +17,12 @@ from .._errors import HydrotactError
 from ._log import BarometerLog, _runs
 
 METHODS = ("auto", "contact", "indentation", "force", "signal")
+# Defaults: |force| at or below this is no load (the `contact` flag's threshold), N; a
+# quiet stretch has rolling stds within QUIET_FACTOR noise stds; a no-load stretch lies
+# within LEVEL_FACTOR noise stds of the baseline its neighbours predict.
+FORCE_THRESHOLD_N = 0.1
+QUIET_FACTOR = 2.0
+LEVEL_FACTOR = 6.0
 # The noise of a channel from its first differences: MAD -> std of a Gaussian, and
 # first differences of white noise have sqrt(2) times its std.
 _MAD_TO_STD = 1.4826
@@ -158,9 +164,9 @@ def find_no_load_segments(
     method: str = "auto",
     min_duration: float = 0.5,
     margin: float = 0.0,
-    force_threshold: float = 0.1,
-    quiet_factor: float = 2.0,
-    level_factor: float = 6.0,
+    force_threshold: float = FORCE_THRESHOLD_N,
+    quiet_factor: float = QUIET_FACTOR,
+    level_factor: float = LEVEL_FACTOR,
     source: str = "log",
 ) -> list[tuple[int, int]]:
     """The stretches of `log` where nothing loads the sensor, as row ranges.
@@ -264,7 +270,7 @@ def tare_log(
     if segments is not None and segment_times is not None:
         raise HydrotactError(f"{source}: give the no-load segments as rows or as times, not both")
     if segments is None and segment_times is None:
-        found, used = _detect(log, method, min_duration, margin, 0.1, 2.0, 6.0, source)
+        found, used = _detect(log, method, min_duration, margin, FORCE_THRESHOLD_N, QUIET_FACTOR, LEVEL_FACTOR, source)
     else:
         found, used = _given_segments(log, segments, segment_times, source)
     if not found:
