@@ -1,0 +1,15 @@
+"""System identification: fit the elastomer's Prony material, channel gains and
+offsets to barometer logs, with uncertainties and a report."""
+
+from ._fit import (
+    MAX_AUTO_TERMS as MAX_AUTO_TERMS,
+    Estimate as Estimate,
+    FitResult as FitResult,
+    fit_auto as fit_auto,
+    fit_parameters as fit_parameters,
+    fit_problem as fit_problem,
+    make_initial_guess as make_initial_guess,
+)
+from ._model import ParameterLayout as ParameterLayout, calc_predictions as calc_predictions, calc_residuals as calc_residuals
+from ._problem import FitProblem as FitProblem, LogArrays as LogArrays, estimate_noise as estimate_noise, make_fit_problem as make_fit_problem
+from ._solve import SOLVERS as SOLVERS, solve_least_squares as solve_least_squares

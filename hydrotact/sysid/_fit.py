@@ -1,0 +1,272 @@
+"""Fit a Prony material (and channel gains and offsets) to barometer logs.
+
+`fit_problem` runs one solver from a linear-fit start and returns a :class:`FitResult`
+with the parameter covariance from the Jacobian, C = s² (JᵀJ)⁻¹ with s² the reduced
+chi-square (the residuals are already divided by each channel's noise estimate);
+standard errors of positive parameters follow by the delta method (σ_E = E σ_log E).
+`fit_auto` fits 0..max_terms Prony terms and keeps the one with the lowest Bayesian
+information criterion, BIC = N ln(RSS/N) + P ln N.
+"""
+
+import dataclasses
+import time
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import HydrotactError
+from ..visco import Prony
+from ._initial import _MODULUS_FLOOR, design_block, fit_linear_moduli, make_tau_grid, merge_terms
+from ._model import ParameterLayout, calc_predictions, calc_residuals, make_layout, pack
+from ._problem import FitProblem
+from ._solve import SOLVERS, calc_jacobian, solve_least_squares
+
+MAX_AUTO_TERMS = 4
+
+
+@dataclasses.dataclass(frozen=True)
+class Estimate:
+    """A fitted number and its standard error."""
+
+    value: float
+    std: float
+
+    def to_json(self) -> dict:
+        return {"value": float(self.value), "std": float(self.std)}
+
+
+@dataclasses.dataclass(frozen=True)
+class FitResult:
+    """The outcome of a fit (host, NumPy).
+
+    **Fields:** `problem`, `layout`; `x` the solution (flat, log space for positive
+    parameters) and `names`; `covariance` of x; `chi_square` Σ r², `dof` N − P,
+    `num_residuals` N; `num_steps`, `converged`, `solver`, `seconds` (including
+    compilation); `criteria` {num_terms: BIC} when the number of terms was chosen.
+    """
+
+    problem: FitProblem
+    layout: ParameterLayout
+    x: np.ndarray
+    names: list
+    covariance: np.ndarray
+    chi_square: float
+    num_residuals: int
+    num_steps: int
+    converged: bool
+    solver: str
+    seconds: float
+    criteria: dict = dataclasses.field(default_factory=dict)
+
+    @property
+    def dof(self) -> int:
+        return max(1, self.num_residuals - self.layout.size)
+
+    @property
+    def reduced_chi_square(self) -> float:
+        return self.chi_square / self.dof
+
+    @property
+    def bic(self) -> float:
+        n = self.num_residuals
+        return float(n * np.log(max(self.chi_square, 1e-300) / n) + self.layout.size * np.log(n))
+
+    @property
+    def std_log(self) -> np.ndarray:
+        return np.sqrt(np.maximum(np.diag(self.covariance), 0.0))
+
+    def _estimate(self, name: str, positive: bool = True) -> Estimate:
+        k = self.names.index(name)
+        value = float(np.exp(self.x[k])) if positive else float(self.x[k])
+        return Estimate(value, value * float(self.std_log[k]) if positive else float(self.std_log[k]))
+
+    @property
+    def long_term_modulus(self) -> Estimate:
+        if not self.layout.has_long_term:
+            return Estimate(1.0, 0.0)
+        return self._estimate("log_long_term_modulus")
+
+    @property
+    def terms(self) -> list[tuple[Estimate, Estimate]]:
+        """(Eᵢ, τᵢ) estimates, τ ascending."""
+        pairs = [(self._estimate(f"log_modulus_{k + 1}"), self._estimate(f"log_tau_{k + 1}")) for k in range(self.layout.num_terms)]
+        return sorted(pairs, key=lambda pair: pair[1].value)
+
+    @property
+    def instantaneous_modulus(self) -> Estimate:
+        """E(0) = E∞ + Σ Eᵢ, its error from the covariance (gradient of a sum of exps)."""
+        k = [self.names.index(n) for n in self.names if n == "log_long_term_modulus" or n.startswith("log_modulus_")]
+        values = np.exp(self.x[k])
+        value = float(values.sum() + (0.0 if self.layout.has_long_term else 1.0))
+        return Estimate(value, float(np.sqrt(max(values @ self.covariance[np.ix_(k, k)] @ values, 0.0))))
+
+    @property
+    def prony(self) -> Prony:
+        terms = self.terms
+        return Prony(jnp.asarray(self.long_term_modulus.value), jnp.asarray([m.value for m, _ in terms]), jnp.asarray([t.value for _, t in terms]))
+
+    @property
+    def gains(self) -> dict:
+        return {name: self._estimate(f"log_gain[{name}]") for name in self.problem.gain_names}
+
+    def offsets(self) -> list[dict]:
+        """Per log: channel -> offset estimate (Pa)."""
+        result, first = [], 0
+        for k, (info, log) in enumerate(zip(self.problem.infos, self.problem.logs)):
+            entries = {}
+            for c, channel in enumerate(info.channels):
+                theta = self._estimate(f"offset[{k + 1}/{channel}]", positive=False)
+                base, scale = float(log.offset_base[c]), float(log.offset_scale[c])
+                entries[channel] = Estimate(base + scale * theta.value, scale * theta.std)
+            result.append(entries)
+        return result
+
+    def predictions(self) -> list[np.ndarray]:
+        return [np.asarray(p) for p in _predict(jnp.asarray(self.x), self.problem, self.layout)]
+
+    def residual_diagnostics(self) -> list[dict]:
+        """Per log and column: RMS residual (data units), RMS in noise units, lag-1
+        autocorrelation of the residual (near 0 for white residuals) and the largest
+        |residual|."""
+        diagnostics = []
+        for info, log, prediction in zip(self.problem.infos, self.problem.logs, self.predictions()):
+            residual = np.asarray(log.observed) - prediction
+            columns = {}
+            for c, name in enumerate(info.channels + info.force_columns):
+                r = residual[:, c] - residual[:, c].mean()
+                lag1 = float(np.dot(r[1:], r[:-1]) / max(np.dot(r, r), 1e-300))
+                columns[name] = {
+                    "rms": float(np.sqrt(np.mean(residual[:, c] ** 2))),
+                    "rms_in_noise": float(np.sqrt(np.mean(residual[:, c] ** 2)) / info.noise[c]),
+                    "noise": float(info.noise[c]),
+                    "lag1_autocorrelation": lag1,
+                    "max_abs": float(np.max(np.abs(residual[:, c]))),
+                }
+            diagnostics.append({"source": info.source, "columns": columns})
+        return diagnostics
+
+
+@eqx.filter_jit
+def _predict(x, problem, layout):
+    return calc_predictions(x, problem, layout)
+
+
+def _residual_fn(layout):
+    return lambda x, problem: calc_residuals(x, problem, layout)
+
+
+@eqx.filter_jit
+def _run(problem: FitProblem, layout: ParameterLayout, x0, solver: str, bounds, rtol: float, atol: float, max_steps: int):
+    residual_fn = _residual_fn(layout)
+    x, steps, converged = solve_least_squares(residual_fn, x0, problem, solver, rtol=rtol, atol=atol, max_steps=max_steps, bounds=bounds)
+    residuals = residual_fn(x, problem)
+    jacobian = calc_jacobian(residual_fn, x, problem)
+    return x, steps, converged, jnp.sum(residuals**2), jacobian.T @ jacobian
+
+
+def fit_parameters(problem: FitProblem, layout: ParameterLayout, x0, solver: str = "lm", rtol: float = 1e-10, atol: float = 1e-10, max_steps: int = 400):
+    """The fitted x alone (pure): differentiable in the problem's data through the
+    implicit function theorem (for the optimistix solvers)."""
+    x, _, _ = solve_least_squares(_residual_fn(layout), x0, problem, solver, rtol=rtol, atol=atol, max_steps=max_steps)
+    return x
+
+
+def make_initial_guess(problem: FitProblem, num_terms: int) -> tuple[ParameterLayout, np.ndarray]:
+    """A layout for `num_terms` Prony terms and the linear-fit start (host)."""
+    layout = make_layout(problem, num_terms)
+    times_list = [np.asarray(log.times) for log in problem.logs]
+    grid = make_tau_grid(times_list)
+    lumped = problem.mode == "lumped"
+    blocks, scales = [], []
+    for log in problem.logs:
+        observed = np.asarray(log.observed)
+        count = log.num_channels
+        inputs = np.asarray(log.inputs) ** 1.5 if lumped else np.asarray(log.inputs)
+        channel_scales = None
+        if lumped:
+            spread = np.percentile(observed, 99.5, axis=0) - np.percentile(observed, 0.5, axis=0)
+            channel_scales = np.maximum(spread, 1e-12)
+            scales.append(channel_scales)
+        blocks.append(design_block(log.times, inputs, observed, log.weights, count, channel_scales, grid))
+    moduli = fit_linear_moduli(blocks, grid)
+    total = max(float(moduli.sum()), 1e-300)
+    floor = _MODULUS_FLOOR * total
+    long_term = max(float(moduli[0]), floor)
+    taus, term_moduli = merge_terms(grid, moduli[1:], num_terms, floor)
+    offsets = np.zeros(layout.num_channels)
+    kwargs = {}
+    if lumped:
+        amplitudes = np.concatenate(scales) * long_term
+        kwargs = {"amplitudes": amplitudes, "exponents": np.full(layout.num_channels, 1.5)}
+        term_moduli, long_term = term_moduli / long_term, 1.0
+    x0 = pack(layout, long_term=long_term, moduli=term_moduli, taus=taus, gains=np.ones(layout.num_gains), offsets=offsets, **kwargs)
+    # Offsets: the mean misfit of each channel at the start, in noise units.
+    predictions = _predict(jnp.asarray(x0), problem, layout)
+    first = layout.num_material + layout.num_gains
+    for log, prediction in zip(problem.logs, predictions):
+        count = log.num_channels
+        misfit = np.mean(np.asarray(log.observed)[:, :count] - np.asarray(prediction)[:, :count], axis=0)
+        x0[first : first + count] = misfit / np.asarray(log.offset_scale)
+        first += count
+    return layout, x0
+
+
+def _bounds(problem: FitProblem, layout: ParameterLayout, x0: np.ndarray):
+    """Box bounds for L-BFGS-B: τ within [shortest step / 10, 10 × span], moduli and
+    gains within 10⁻⁶..10⁶ of the start, offsets free."""
+    lower, upper = np.full_like(x0, -1e12), np.full_like(x0, 1e12)
+    shortest = min(float(np.min(np.diff(np.asarray(log.times)))) for log in problem.logs)
+    span = max(float(log.times[-1] - log.times[0]) for log in problem.logs)
+    material = int(layout.has_long_term)
+    k = slice(material + layout.num_terms, material + 2 * layout.num_terms)
+    lower[k], upper[k] = np.log(shortest / 10.0), np.log(10.0 * span)
+    for sl in (slice(0, material + layout.num_terms), slice(layout.num_material, layout.num_material + layout.num_gains)):
+        lower[sl], upper[sl] = x0[sl] - np.log(1e6), x0[sl] + np.log(1e6)
+    if layout.mode == "lumped":
+        start = layout.num_material + layout.num_gains + layout.num_channels
+        lower[start:], upper[start:] = x0[start:] - np.log(1e6), x0[start:] + np.log(1e6)
+    return jnp.asarray(lower), jnp.asarray(upper)
+
+
+def fit_problem(problem: FitProblem, num_terms: int, solver: str = "lm", *, rtol: float = 1e-10, atol: float = 1e-10, max_steps: int = 400) -> FitResult:
+    """Fit `num_terms` Prony terms (with gains and offsets) to the problem (host)."""
+    if solver not in SOLVERS:
+        raise HydrotactError(f"unknown solver {solver!r}; use one of {', '.join(SOLVERS)}")
+    if int(num_terms) < 0:
+        raise HydrotactError(f"the number of Prony terms must be 0 or more, got {num_terms}")
+    start = time.perf_counter()
+    layout, x0 = make_initial_guess(problem, int(num_terms))
+    bounds = _bounds(problem, layout, x0) if solver == "lbfgsb" else None
+    x, steps, converged, chi_square, normal = _run(problem, layout, jnp.asarray(x0), solver, bounds, rtol, atol, max_steps)
+    num_residuals = problem.num_samples
+    dof = max(1, num_residuals - layout.size)
+    normal = np.asarray(normal)
+    covariance = float(chi_square) / dof * np.linalg.pinv(normal, rcond=1e-13, hermitian=True)
+    return FitResult(
+        problem=problem,
+        layout=layout,
+        x=np.asarray(x),
+        names=layout.names(problem),
+        covariance=covariance,
+        chi_square=float(chi_square),
+        num_residuals=num_residuals,
+        num_steps=int(steps),
+        converged=bool(converged),
+        solver=solver,
+        seconds=time.perf_counter() - start,
+    )
+
+
+def fit_auto(problem: FitProblem, solver: str = "lm", max_terms: int = MAX_AUTO_TERMS, progress=None, **options) -> FitResult:
+    """Fit 0..max_terms Prony terms; keep the lowest BIC. `progress(k)` is called
+    after each fit, if given."""
+    results = {}
+    for num_terms in range(max_terms + 1):
+        results[num_terms] = fit_problem(problem, num_terms, solver, **options)
+        if progress is not None:
+            progress(num_terms)
+    criteria = {k: result.bic for k, result in results.items()}
+    best = min(criteria, key=criteria.get)
+    return dataclasses.replace(results[best], criteria=criteria)

@@ -1,0 +1,129 @@
+"""The fit's parameters and residuals (pure).
+
+All parameters live in one flat vector x, positive ones as logarithms:
+
+    [log E∞]  (full mode only: lumped fits the kernel's shape, E∞ ≡ 1)
+    log E₁ … log E_K, log τ₁ … log τ_K
+    log gain  per free channel gain
+    θ         per log and channel: offset = base + noise · θ
+    log a_c, log b_c   per log and channel (lumped mode: a_c (δ/δ_max)^b_c)
+
+The residuals are (observed − model) / noise, stacked over logs, samples and columns.
+"""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from ..visco import Prony, calc_hereditary_integral
+from ._problem import FitProblem
+
+
+class ParameterLayout(eqx.Module):
+    """Where each parameter sits in x (static, hashable)."""
+
+    mode: str = eqx.field(static=True)
+    num_terms: int = eqx.field(static=True)
+    num_gains: int = eqx.field(static=True)
+    channel_counts: tuple[int, ...] = eqx.field(static=True)
+
+    @property
+    def has_long_term(self) -> bool:
+        return self.mode == "full"
+
+    @property
+    def num_material(self) -> int:
+        return int(self.has_long_term) + 2 * self.num_terms
+
+    @property
+    def num_channels(self) -> int:
+        return sum(self.channel_counts)
+
+    @property
+    def size(self) -> int:
+        per_channel = 3 if self.mode == "lumped" else 1
+        return self.num_material + self.num_gains + per_channel * self.num_channels
+
+    def names(self, problem: FitProblem) -> list[str]:
+        """Parameter names, in x's order (as in the covariance matrix)."""
+        names = ["log_long_term_modulus"] if self.has_long_term else []
+        names += [f"log_modulus_{k + 1}" for k in range(self.num_terms)]
+        names += [f"log_tau_{k + 1}" for k in range(self.num_terms)]
+        names += [f"log_gain[{name}]" for name in problem.gain_names]
+        labels = [f"{k + 1}/{channel}" for k, info in enumerate(problem.infos) for channel in info.channels]
+        names += [f"offset[{label}]" for label in labels]
+        if self.mode == "lumped":
+            names += [f"log_amplitude[{label}]" for label in labels]
+            names += [f"log_exponent[{label}]" for label in labels]
+        return names
+
+    def unpack(self, x):
+        """x -> dict of named parameter arrays (natural scale where positive)."""
+        at = 0
+
+        def take(count):
+            nonlocal at
+            piece = x[at : at + count]
+            at += count
+            return piece
+
+        long_term = jnp.exp(take(1)[0]) if self.has_long_term else jnp.ones((), x.dtype)
+        moduli = jnp.exp(take(self.num_terms))
+        taus = jnp.exp(take(self.num_terms))
+        gains = jnp.exp(take(self.num_gains))
+        offsets = take(self.num_channels)
+        parameters = {"prony": Prony(long_term, moduli, taus), "gains": gains, "offsets": offsets}
+        if self.mode == "lumped":
+            parameters["amplitudes"] = jnp.exp(take(self.num_channels))
+            parameters["exponents"] = jnp.exp(take(self.num_channels))
+        return parameters
+
+
+def make_layout(problem: FitProblem, num_terms: int) -> ParameterLayout:
+    return ParameterLayout(mode=problem.mode, num_terms=int(num_terms), num_gains=len(problem.gain_names), channel_counts=tuple(log.num_channels for log in problem.logs))
+
+
+def _lumped_inputs(depth, amplitudes, exponents):
+    """a_c · δ^b_c for δ (T, 1) ≥ 0, with finite gradients at δ = 0."""
+    positive = depth > 0.0
+    power = jnp.exp(exponents * jnp.log(jnp.where(positive, depth, 1.0)))
+    return amplitudes * jnp.where(positive, power, 0.0)
+
+
+def calc_predictions(x, problem: FitProblem, layout: ParameterLayout, method: str = "scan"):
+    """The model's channel readings (and forces) per log: a tuple of (T, C + F)."""
+    parameters = layout.unpack(x)
+    prony = parameters["prony"]
+    gains_all = jnp.concatenate([parameters["gains"], jnp.ones((1,), x.dtype)])
+    predictions = []
+    first = 0
+    for log, count in zip(problem.logs, layout.channel_counts):
+        offsets = log.offset_base + log.offset_scale * parameters["offsets"][first : first + count]
+        if layout.mode == "lumped":
+            inputs = _lumped_inputs(log.inputs, parameters["amplitudes"][first : first + count], parameters["exponents"][first : first + count])
+        else:
+            inputs = log.inputs
+        first += count
+        response = calc_hereditary_integral(prony, log.times, inputs, method=method)
+        gains = gains_all[log.gain_index]  # index -1 picks the fixed 1
+        channels = offsets + gains * response[:, :count]
+        predictions.append(jnp.concatenate([channels, response[:, count:]], axis=1))
+    return tuple(predictions)
+
+
+def calc_residuals(x, problem: FitProblem, layout: ParameterLayout):
+    """Weighted residuals (observed − model) / noise of all logs, one flat vector."""
+    predictions = calc_predictions(x, problem, layout)
+    return jnp.concatenate([((log.observed - prediction) * log.weights).reshape(-1) for log, prediction in zip(problem.logs, predictions)])
+
+
+def pack(layout: ParameterLayout, *, long_term, moduli, taus, gains, offsets, amplitudes=None, exponents=None) -> np.ndarray:
+    """The flat x from natural-scale numbers (host)."""
+    pieces = [np.log([long_term])] if layout.has_long_term else []
+    pieces += [np.log(np.asarray(moduli, dtype=np.float64)), np.log(np.asarray(taus, dtype=np.float64))]
+    pieces += [np.log(np.asarray(gains, dtype=np.float64)), np.asarray(offsets, dtype=np.float64)]
+    if layout.mode == "lumped":
+        pieces += [np.log(np.asarray(amplitudes, dtype=np.float64)), np.log(np.asarray(exponents, dtype=np.float64))]
+    x = np.concatenate([np.atleast_1d(piece) for piece in pieces])
+    assert x.shape == (layout.size,)
+    return x

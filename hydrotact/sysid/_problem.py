@@ -1,0 +1,243 @@
+"""Fit problems: logs turned into the arrays a fit runs on (host side).
+
+A fit compares each log's barometer channels (and reference force columns, when the
+log has them) with the model
+
+    reading_c(t) = offset_c + gain_c · (E ∗ u_c)(t),
+
+where (E ∗ u) is the hereditary integral of the unit-modulus response u with the Prony
+relaxation modulus (see :mod:`hydrotact.visco`). Two ways to get u:
+
+- **full**: the log carries the probe pose (`probe_x`, `probe_y`, `probe_z`, optional
+  `probe_rx`..`probe_rz`) and names a sensor spec and a probe; the simulator computes
+  the unit-modulus taxel pressures and contact force once per distinct pose, and the
+  fit runs in that reduced space (the elastic response is linear in E).
+- **lumped**: for a sensor nobody has modelled, a column gives the indentation δ; each
+  channel's elastic response is a monotone power law a_c · (δ/δ_max)^b_c, fitted with
+  the kernel. Then only the shape of E(t) (the ratios Eᵢ/E∞ and τᵢ) is identifiable.
+
+Each channel is weighted by its noise, estimated from the log itself (the median
+absolute second difference, robust to contacts and ramps), so the residuals are in
+units of noise standard deviations and the covariance needs no further scaling
+beyond the reduced chi-square.
+"""
+
+import dataclasses
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import HydrotactError
+from .._types import Array, Float, Int
+
+FORCE_COLUMNS = ("fx", "fy", "fz")
+POSE_COLUMNS = ("probe_x", "probe_y", "probe_z")
+ROTATION_COLUMNS = ("probe_rx", "probe_ry", "probe_rz")
+MODES = ("full", "lumped")
+# Channels whose unit response stays below this fraction of the strongest channel's
+# never see the contact: their gain is not identifiable and stays 1.
+_SILENT_FRACTION = 1e-3
+
+
+class LogArrays(eqx.Module):
+    """One log, ready for the residual function (device arrays).
+
+    **Fields:**
+
+    - `times` (T,) s.
+    - `inputs` (T, C + F): unit-modulus responses of the C channels then the F force
+      columns (full mode: Pa and N per Pa of E); lumped mode: the normalised
+      indentation δ/δ_max (T, 1), shared by the channels.
+    - `observed` (T, C + F): the channels (Pa) and the reference forces (N).
+    - `weights` (C + F,): 1 / noise standard deviation.
+    - `offset_base`, `offset_scale` (C,): the channel offset is base + scale · θ.
+    - `gain_index` (C,): index into the shared gains, −1 for a fixed gain of 1.
+    """
+
+    times: Float[Array, " num_samples"]
+    inputs: Float[Array, "num_samples num_inputs"]
+    observed: Float[Array, "num_samples num_columns"]
+    weights: Float[Array, " num_columns"]
+    offset_base: Float[Array, " num_channels"]
+    offset_scale: Float[Array, " num_channels"]
+    gain_index: Int[Array, " num_channels"]
+    num_channels: int = eqx.field(static=True)
+
+
+@dataclasses.dataclass(frozen=True)
+class LogInfo:
+    """What the report needs to know of a log (host)."""
+
+    source: str
+    channels: tuple[str, ...]
+    force_columns: tuple[str, ...]
+    sensor: str | None
+    pressure: str
+    sha256: str | None
+    noise: tuple[float, ...]  # (C + F,) noise standard deviations, Pa and N
+
+
+class FitProblem(eqx.Module):
+    """A system-identification problem: the logs and how they are modelled.
+
+    `mode` "full" or "lumped"; `gain_names` the shared channel gains that are free
+    (keyed `sensor/channel`); `logs` LogArrays; `infos` LogInfo per log (static).
+    """
+
+    logs: tuple[LogArrays, ...]
+    mode: str = eqx.field(static=True)
+    gain_names: tuple[str, ...] = eqx.field(static=True)
+    infos: tuple[LogInfo, ...] = eqx.field(static=True)
+
+    @property
+    def num_samples(self) -> int:
+        return sum(int(log.observed.size) for log in self.logs)
+
+
+def estimate_noise(values: np.ndarray) -> np.ndarray:
+    """Per-column white-noise standard deviation of (T, C) samples: the median absolute
+    second difference / (0.6745 √6), which ignores steps, ramps and slow drift; floored
+    at the quantisation noise implied by the smallest non-zero step (LSB / √12)."""
+    values = np.asarray(values, dtype=np.float64)
+    second = np.diff(values, n=2, axis=0)
+    sigma = np.median(np.abs(second), axis=0) / (0.6745 * np.sqrt(6.0))
+    steps = np.abs(np.diff(values, axis=0))
+    steps = np.where(steps > 0.0, steps, np.inf)
+    lsb = np.min(steps, axis=0)
+    floor = np.where(np.isfinite(lsb), lsb / np.sqrt(12.0), 0.0)
+    scale = np.max(np.abs(values), axis=0)
+    return np.maximum(np.maximum(sigma, floor), 1e-12 * np.maximum(scale, 1.0))
+
+
+def _file_digest(path) -> str | None:
+    import hashlib
+
+    path = Path(path)
+    if not path.is_file():
+        return None
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _unique_pose_responses(log, source: str, field: str, num_rays: int, progress: bool):
+    """Unit responses of the log's taxels and contact force at its probe poses: each
+    distinct pose is simulated once (holds repeat poses), results cached on disk."""
+    from .._contact_job import parse_probe
+    from .._files import atomic_path, cache_dir, digest
+    from ..contact import make_pose
+    from ..sensors import load_sensor
+    from ..sim import compute_unit_responses, make_sensor_model
+
+    metadata = log.metadata
+    missing = [name for name in POSE_COLUMNS if name not in log.columns]
+    if missing:
+        raise HydrotactError(f"{source}: a full-mode fit needs the probe pose; column {missing[0]!r} is missing (or fit with --lumped --indentation COLUMN)")
+    if "probe" not in metadata:
+        raise HydrotactError(f"{source}: metadata has no 'probe' (e.g. cylinder:d=2mm); a full-mode fit needs to know the probe")
+    spec = load_sensor(metadata["sensor"], source=f"{source}: sensor")
+    if spec.num_taxels != len(metadata["channels"]):
+        raise HydrotactError(f"{source}: channels: {len(metadata['channels'])} channels, but sensor {spec.name} has {spec.num_taxels} taxels")
+    poses = np.column_stack([np.asarray(log.columns[name], dtype=np.float64) for name in POSE_COLUMNS] + [np.asarray(log.columns.get(name, np.zeros(log.num_samples)), dtype=np.float64) for name in ROTATION_COLUMNS])
+    unique, inverse = np.unique(poses, axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    key = digest("unit-responses-1", spec.name, repr(spec.to_json()), metadata["probe"], field, num_rays, unique.tobytes())
+    cache = cache_dir() / "unit_responses" / f"{key}.npz"
+    if cache.is_file():
+        with np.load(cache) as saved:
+            taxels, forces = saved["taxels"], saved["forces"]
+    else:
+        probe = parse_probe(metadata["probe"])
+        model = make_sensor_model(spec, field_kind=field, num_rays=num_rays)
+        X_SR = jax.vmap(make_pose)(jnp.asarray(unique[:, :3]), jnp.asarray(unique[:, 3:]))
+        unit, _ = compute_unit_responses(model, probe, X_SR, progress=progress)
+        taxels, forces = np.asarray(unit.taxel_pressures), np.asarray(unit.force_S)
+        with atomic_path(cache, suffix=".npz") as tmp:
+            np.savez(tmp, taxels=taxels, forces=forces)
+    return taxels[inverse], forces[inverse]
+
+
+def _channel_values(log) -> np.ndarray:
+    return np.column_stack([np.asarray(log.columns[name], dtype=np.float64) for name in log.metadata["channels"]])
+
+
+def make_fit_problem(logs, *, mode: str = "full", indentation: str = "indentation", field: str | None = None, num_rays: int | None = None, use_forces: bool = True, unit_responses=None, sources=None, progress: bool = False) -> FitProblem:
+    """Build a FitProblem from BarometerLogs (host).
+
+    **Arguments:**
+
+    - `logs`: BarometerLogs (hydrotact.data), fitted jointly: one material; offsets
+      per log and channel; gains per channel, shared by logs of the same sensor.
+    - `mode`: "full" (simulate the unit responses along the logged probe poses) or
+      "lumped" (a power law of the `indentation` column).
+    - `field`, `num_rays`: full mode's strain field and rays per taxel (default: the
+      log's metadata, else laplace and 64).
+    - `use_forces`: full mode: also fit the reference force columns fx, fy, fz when
+      the log has them; they fix the modulus' scale, so the channel gains are free.
+      Without them the gains stay 1 (a gain and E are not separable from pressures).
+    - `unit_responses`: full mode: per log, (taxel pressures (T, C), force (T, 3)) per
+      pascal of E, if already computed (else simulated here from the logged poses).
+    - `sources`: names for messages and the report (default: the log's path or index).
+    """
+    if mode not in MODES:
+        raise HydrotactError(f"unknown fit mode {mode!r}; use one of {', '.join(MODES)}")
+    if not logs:
+        raise HydrotactError("no logs to fit")
+    sources = list(sources) if sources is not None else [f"log {k + 1}" for k in range(len(logs))]
+    prepared, infos, gain_names = [], [], []
+    for k, (log, source) in enumerate(zip(logs, sources)):
+        if log.num_samples < 8:
+            raise HydrotactError(f"{source}: {log.num_samples} samples; a fit needs at least 8")
+        channels = tuple(log.metadata["channels"])
+        observed = _channel_values(log)
+        times = np.asarray(log.times, dtype=np.float64)
+        force_columns: tuple[str, ...] = ()
+        if mode == "full":
+            metadata = log.metadata
+            if unit_responses is not None:
+                taxels, forces = (np.asarray(a, dtype=np.float64) for a in unit_responses[k])
+                if taxels.shape != observed.shape or forces.shape != (len(times), 3):
+                    raise HydrotactError(f"{source}: unit responses of shapes {taxels.shape} and {forces.shape} do not match {observed.shape} channels and (T, 3) forces")
+            else:
+                taxels, forces = _unique_pose_responses(log, source, field or metadata.get("field", "laplace"), num_rays or metadata.get("num_rays", 64), progress)
+            inputs = taxels
+            if use_forces:
+                force_columns = tuple(name for k, name in enumerate(FORCE_COLUMNS) if name in log.columns and np.max(np.abs(forces[:, k])) > 0.0)
+                keep = [FORCE_COLUMNS.index(name) for name in force_columns]
+                inputs = np.column_stack([taxels, forces[:, keep]])
+                observed = np.column_stack([observed] + [np.asarray(log.columns[name], dtype=np.float64) for name in force_columns])
+        else:
+            if indentation not in log.columns:
+                raise HydrotactError(f"{source}: no indentation column {indentation!r} for a lumped fit (has {', '.join(log.columns)})")
+            depth = np.asarray(log.columns[indentation], dtype=np.float64)
+            deepest = float(np.max(depth))
+            if not deepest > 0.0:
+                raise HydrotactError(f"{source}: column {indentation!r} is never positive: the probe never indents the skin, so there is nothing to fit")
+            inputs = np.clip(depth / deepest, 0.0, None)[:, None]
+        noise = estimate_noise(observed)
+        num_channels = len(channels)
+        gain_index = np.full(num_channels, -1)
+        if mode == "full" and force_columns:
+            strength = np.max(np.abs(inputs[:, :num_channels]), axis=0)
+            for c in np.flatnonzero(strength > _SILENT_FRACTION * strength.max()):
+                name = f"{log.metadata['sensor']}/{channels[c]}"
+                if name not in gain_names:
+                    gain_names.append(name)
+                gain_index[c] = gain_names.index(name)
+        baseline = np.median(observed[: max(4, len(times) // 50), :num_channels], axis=0)
+        prepared.append(
+            LogArrays(
+                times=jnp.asarray(times),
+                inputs=jnp.asarray(inputs),
+                observed=jnp.asarray(observed),
+                weights=jnp.asarray(1.0 / noise),
+                offset_base=jnp.asarray(baseline),
+                offset_scale=jnp.asarray(noise[:num_channels]),
+                gain_index=jnp.asarray(gain_index),
+                num_channels=num_channels,
+            )
+        )
+        path = getattr(log, "path", None) or source
+        infos.append(LogInfo(source=source, channels=channels, force_columns=force_columns, sensor=log.metadata.get("sensor"), pressure=log.metadata.get("pressure", "absolute"), sha256=_file_digest(path), noise=tuple(float(v) for v in noise)))
+    return FitProblem(logs=tuple(prepared), mode=mode, gain_names=tuple(gain_names), infos=tuple(infos))

@@ -1,0 +1,134 @@
+"""Prony-series relaxation and the hereditary integral over a piecewise-linear input.
+
+Linear viscoelasticity by the correspondence principle: the elastic response of the
+sensor is linear in the modulus, so with the unit-modulus response u(t) (what a taxel
+reads per pascal of E, or a force per pascal) the viscoelastic response is the
+hereditary integral
+
+    p(t) = ∫_{-∞}^{t} E(t − s) du(s)/ds ds,    E(t) = E∞ + Σᵢ Eᵢ exp(−t/τᵢ).
+
+The input is at rest before the first sample: a non-zero u(t₀) is a step at t₀, so a
+step input gives p(t) = E(t − t₀) u(t₀) exactly. Between samples u is linear, and each
+term's internal state hᵢ obeys the exact update over a step Δ = tₙ₊₁ − tₙ with slope
+r = (uₙ₊₁ − uₙ)/Δ:
+
+    hᵢ(tₙ₊₁) = exp(−Δ/τᵢ) hᵢ(tₙ) + Eᵢ τᵢ r (1 − exp(−Δ/τᵢ)),
+
+so p = E∞ u + Σᵢ hᵢ is exact for piecewise-linear u, at any (non-uniform) time steps.
+The recursion is linear in h, which makes it an associative scan as well as a
+sequential one: `method="scan"` runs it in a `lax.scan` (O(T · terms) work, T steps),
+`method="associative"` in `lax.associative_scan` (the same work, O(log T) depth: the
+faster one on a GPU and, vectorised, on a CPU).
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import HydrotactError
+from .._types import Array, Float
+
+
+class Prony(eqx.Module):
+    """A Prony relaxation modulus E(t) = E∞ + Σᵢ Eᵢ exp(−t/τᵢ) (a pytree).
+
+    **Fields:** `long_term_modulus` E∞, Pa; `moduli` (num_terms,) Eᵢ, Pa; `taus`
+    (num_terms,) τᵢ, s. E(0) = E∞ + Σ Eᵢ is the instantaneous modulus.
+    """
+
+    long_term_modulus: Float[Array, ""]
+    moduli: Float[Array, " num_terms"]
+    taus: Float[Array, " num_terms"]
+
+    @property
+    def num_terms(self) -> int:
+        return self.moduli.shape[-1]
+
+    @property
+    def instantaneous_modulus(self):
+        return self.long_term_modulus + jnp.sum(self.moduli, axis=-1)
+
+    def calc_relaxation_modulus(self, times):
+        """E(t) at `times` (any shape), Pa."""
+        times = jnp.asarray(times)
+        decay = jnp.exp(-times[..., None] / self.taus)
+        return self.long_term_modulus + jnp.sum(self.moduli * decay, axis=-1)
+
+
+def make_prony(long_term_modulus, moduli=(), taus=(), source: str | None = None) -> Prony:
+    """A Prony series from numbers, checked on the host: E∞ > 0, Eᵢ ≥ 0, τᵢ > 0 and
+    finite, as many τ as moduli. Terms are sorted by τ."""
+    prefix = f"{source}: " if source else ""
+    long_term = float(long_term_modulus)
+    moduli = np.atleast_1d(np.asarray(moduli, dtype=np.float64))
+    taus = np.atleast_1d(np.asarray(taus, dtype=np.float64))
+    if not np.isfinite(long_term) or long_term <= 0.0:
+        raise HydrotactError(f"{prefix}long-term modulus must be a positive pressure in Pa, got {long_term:g}")
+    if moduli.ndim != 1 or moduli.shape != taus.shape:
+        raise HydrotactError(f"{prefix}{moduli.size} Prony moduli but {taus.size} relaxation times; give one tau per modulus")
+    for k, (modulus, tau) in enumerate(zip(moduli, taus)):
+        if not np.isfinite(modulus) or modulus < 0.0:
+            raise HydrotactError(f"{prefix}Prony term {k + 1}: modulus must be a non-negative pressure in Pa, got {modulus:g}")
+        if not np.isfinite(tau) or tau <= 0.0:
+            raise HydrotactError(f"{prefix}Prony term {k + 1}: relaxation time must be positive, got {tau:g} s")
+    order = np.argsort(taus, kind="stable")
+    return Prony(jnp.asarray(long_term), jnp.asarray(moduli[order]), jnp.asarray(taus[order]))
+
+
+def _step_coefficients(prony: Prony, times):
+    """Per step n -> n+1 and term i: the decay aₙᵢ = exp(−Δ/τᵢ) and the gain
+    gₙᵢ = Eᵢ τᵢ (1 − aₙᵢ)/Δ that multiplies the input increment (shapes (T−1, terms))."""
+    steps = jnp.diff(times)[:, None]
+    ratio = steps / prony.taus
+    decay = jnp.exp(-ratio)
+    gain = prony.moduli * (-jnp.expm1(-ratio)) / ratio
+    return decay, gain
+
+
+def calc_hereditary_integral(prony: Prony, times, unit_values, method: str = "scan"):
+    """The viscoelastic response to a unit-modulus input sampled at `times` (pure).
+
+    **Arguments:**
+
+    - `prony`: the relaxation modulus.
+    - `times`: (T,) strictly increasing sample times, s (steps may vary).
+    - `unit_values`: (T, ...) the unit-modulus response u at those times (any trailing
+      shape: taxels, force components); linear between samples, at rest before t₀.
+    - `method`: "associative" (`lax.associative_scan`) or "scan" (`lax.scan`); the
+      results agree to round-off.
+
+    **Returns:** (T, ...) the response p(t), in the units of u times Pa.
+    """
+    times = jnp.asarray(times)
+    unit_values = jnp.asarray(unit_values)
+    trailing = unit_values.shape[1:]
+    values = unit_values.reshape(unit_values.shape[0], -1)  # (T, C)
+    decay, gain = _step_coefficients(prony, times)  # (T-1, K)
+    increments = jnp.diff(values, axis=0)  # (T-1, C)
+    start = prony.moduli[:, None] * values[0][None, :]  # (K, C): the step at t0
+    drive = gain[:, :, None] * increments[:, None, :]  # (T-1, K, C)
+    decay = jnp.broadcast_to(decay[:, :, None], drive.shape)
+    if method == "scan":
+
+        def step(state, inputs):
+            a, b = inputs
+            state = a * state + b
+            return state, state
+
+        _, states = jax.lax.scan(step, start, (decay, drive))
+    elif method == "associative":
+
+        def combine(earlier, later):
+            a1, b1 = earlier
+            a2, b2 = later
+            return a1 * a2, a2 * b1 + b2
+
+        # Fold the initial state into the first step so the scan starts from rest.
+        drive = drive.at[0].add(decay[0] * start)
+        _, states = jax.lax.associative_scan(combine, (decay, drive))
+    else:
+        raise ValueError(f"unknown method {method!r}; use 'associative' or 'scan'")
+    states = jnp.concatenate([start[None], states], axis=0)  # (T, K, C)
+    response = prony.long_term_modulus * values + jnp.sum(states, axis=1)
+    return response.reshape((values.shape[0], *trailing))
