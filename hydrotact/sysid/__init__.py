@@ -12,4 +12,5 @@ from ._fit import (
 )
 from ._model import ParameterLayout as ParameterLayout, calc_predictions as calc_predictions, calc_residuals as calc_residuals
 from ._problem import FitProblem as FitProblem, LogArrays as LogArrays, estimate_noise as estimate_noise, make_fit_problem as make_fit_problem
+from ._relaxation import RelaxationFit as RelaxationFit, fit_relaxation_curve as fit_relaxation_curve
 from ._solve import SOLVERS as SOLVERS, solve_least_squares as solve_least_squares

@@ -21,10 +21,13 @@ sequential one: `method="scan"` runs it in a `lax.scan` (O(T · terms) work, T s
 faster one on a GPU and, vectorised, on a CPU).
 """
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.custom_derivatives import SymbolicZero
 
 from .._errors import HydrotactError
 from .._types import Array, Float
@@ -76,39 +79,9 @@ def make_prony(long_term_modulus, moduli=(), taus=(), source: str | None = None)
     return Prony(jnp.asarray(long_term), jnp.asarray(moduli[order]), jnp.asarray(taus[order]))
 
 
-def _step_coefficients(prony: Prony, times):
-    """Per step n -> n+1 and term i: the decay aₙᵢ = exp(−Δ/τᵢ) and the gain
-    gₙᵢ = Eᵢ τᵢ (1 − aₙᵢ)/Δ that multiplies the input increment (shapes (T−1, terms))."""
-    steps = jnp.diff(times)[:, None]
-    ratio = steps / prony.taus
-    decay = jnp.exp(-ratio)
-    gain = prony.moduli * (-jnp.expm1(-ratio)) / ratio
-    return decay, gain
-
-
-def calc_hereditary_integral(prony: Prony, times, unit_values, method: str = "scan"):
-    """The viscoelastic response to a unit-modulus input sampled at `times` (pure).
-
-    **Arguments:**
-
-    - `prony`: the relaxation modulus.
-    - `times`: (T,) strictly increasing sample times, s (steps may vary).
-    - `unit_values`: (T, ...) the unit-modulus response u at those times (any trailing
-      shape: taxels, force components); linear between samples, at rest before t₀.
-    - `method`: "associative" (`lax.associative_scan`) or "scan" (`lax.scan`); the
-      results agree to round-off.
-
-    **Returns:** (T, ...) the response p(t), in the units of u times Pa.
-    """
-    times = jnp.asarray(times)
-    unit_values = jnp.asarray(unit_values)
-    trailing = unit_values.shape[1:]
-    values = unit_values.reshape(unit_values.shape[0], -1)  # (T, C)
-    decay, gain = _step_coefficients(prony, times)  # (T-1, K)
-    increments = jnp.diff(values, axis=0)  # (T-1, C)
-    start = prony.moduli[:, None] * values[0][None, :]  # (K, C): the step at t0
-    drive = gain[:, :, None] * increments[:, None, :]  # (T-1, K, C)
-    decay = jnp.broadcast_to(decay[:, :, None], drive.shape)
+def _linear_recurrence(decay, drive, start, method: str):
+    """States hₙ of hₙ₊₁ = aₙ hₙ + bₙ from h₀ = `start`: decay, drive (T−1, K, C),
+    start (K, C) -> (T, K, C)."""
     if method == "scan":
 
         def step(state, inputs):
@@ -129,6 +102,78 @@ def calc_hereditary_integral(prony: Prony, times, unit_values, method: str = "sc
         _, states = jax.lax.associative_scan(combine, (decay, drive))
     else:
         raise ValueError(f"unknown method {method!r}; use 'associative' or 'scan'")
-    states = jnp.concatenate([start[None], states], axis=0)  # (T, K, C)
-    response = prony.long_term_modulus * values + jnp.sum(states, axis=1)
+    return jnp.concatenate([start[None], states], axis=0)
+
+
+def _kernel_terms(taus, times, values):
+    """Per step and term: x = Δ/τ, the decay a = e^{−x} and the unit-modulus gain
+    c = (1 − e^{−x})/x that multiplies the input increment (shapes (T−1, K, 1))."""
+    ratio = (jnp.diff(times)[:, None] / taus)[:, :, None]
+    return ratio, jnp.exp(-ratio), -jnp.expm1(-ratio) / ratio
+
+
+def _calc_kernel_responses(taus, times, values, method):
+    """gₖ = (e^{−t/τₖ} ∗ u): the response of each unit-modulus term (T, K, C)."""
+    _, decay, gain = _kernel_terms(taus, times, values)
+    drive = gain * jnp.diff(values, axis=0)[:, None, :]
+    start = jnp.broadcast_to(values[0], (taus.shape[0], values.shape[1]))  # the step at t0
+    return _linear_recurrence(jnp.broadcast_to(decay, drive.shape), drive, start, method)
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(3,))
+def _kernel_responses(taus, times, values, method):
+    return _calc_kernel_responses(taus, times, values, method)
+
+
+@functools.partial(_kernel_responses.defjvp, symbolic_zeros=True)
+def _kernel_responses_jvp(method, primals, tangents):
+    """Forward mode with ∂g/∂τ computed once, not once per tangent direction: a fit's
+    Jacobian pushes one tangent per parameter, and only the τ ones reach the kernel.
+
+    Differentiating the update h' = a h + c Δu in τ, with x = Δ/τ:
+    ∂h'/∂τ = a ∂h/∂τ + (x a / τ) h + ((1 − e^{−x})/x − e^{−x}) Δu / τ, from ∂h/∂τ = 0 at t₀.
+    The input enters linearly (g is linear in u); times are not differentiated.
+    """
+    taus, times, values = primals
+    taus_dot, _, values_dot = tangents
+    ratio, decay, gain = _kernel_terms(taus, times, values)
+    responses = _calc_kernel_responses(taus, times, values, method)
+    increments = jnp.diff(values, axis=0)[:, None, :]
+    scale = (taus[None, :, None])
+    drive = (ratio * decay / scale) * responses[:-1] + ((gain - decay) / scale) * increments
+    derivative = _linear_recurrence(jnp.broadcast_to(decay, drive.shape), drive, jnp.zeros_like(responses[0]), method)
+    tangent = jnp.zeros_like(responses)
+    if not isinstance(taus_dot, SymbolicZero):
+        tangent = tangent + derivative * taus_dot[None, :, None]
+    if not isinstance(values_dot, SymbolicZero):
+        tangent = tangent + _calc_kernel_responses(taus, times, values_dot, method)
+    return responses, tangent
+
+
+def calc_hereditary_integral(prony: Prony, times, unit_values, method: str = "scan"):
+    """The viscoelastic response to a unit-modulus input sampled at `times` (pure).
+
+    **Arguments:**
+
+    - `prony`: the relaxation modulus.
+    - `times`: (T,) strictly increasing sample times, s (steps may vary).
+    - `unit_values`: (T, ...) the unit-modulus response u at those times (any trailing
+      shape: taxels, force components); linear between samples, at rest before t₀.
+    - `method`: "scan" (`lax.scan`) or "associative" (`lax.associative_scan`); the
+      results agree to round-off.
+
+    **Returns:** (T, ...) the response p(t), in the units of u times Pa.
+    Differentiable in the Prony parameters and u (not in the times).
+    """
+    if method not in ("scan", "associative"):
+        raise ValueError(f"unknown method {method!r}; use 'associative' or 'scan'")
+    times = jnp.asarray(times)
+    unit_values = jnp.asarray(unit_values)
+    trailing = unit_values.shape[1:]
+    values = unit_values.reshape(unit_values.shape[0], -1)  # (T, C)
+    if prony.taus.shape[0] == 0:
+        response = prony.long_term_modulus * values
+    else:
+        responses = _kernel_responses(prony.taus, times, values, method)  # (T, K, C)
+        response = prony.long_term_modulus * values + jnp.einsum("k,tkc->tc", prony.moduli, responses)
     return response.reshape((values.shape[0], *trailing))
