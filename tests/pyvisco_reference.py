@@ -171,9 +171,11 @@ if __name__ == "__main__":
             rel_t = fit["taus"] / TRUE[:, 1] - 1
             print("  rel err E_i:  " + "  ".join(f"{x:+.2e}" for x in rel_e))
             print("  rel err tau_i:" + "  ".join(f"{x:+.2e}" for x in rel_t))
-        rms_truth = np.sqrt(np.mean((truth - prony_relaxation(t, fit["long_term_modulus"], fit["moduli"], fit["taus"])) ** 2))
+        model = prony_relaxation(t, fit["long_term_modulus"], fit["moduli"], fit["taus"])
+        rms_truth = np.sqrt(np.mean((truth - model) ** 2))
         print(f"  residual RMS vs data {fit['residual_rms']:.4g} Pa, vs noiseless truth {rms_truth:.4g} Pa")
-        print(f"  E_0 = {fit['instantaneous_modulus']:.6g} Pa (true {E_INF + TRUE[:, 0].sum():.6g}), {fit['seconds'] * 1e3:.1f} ms")
+        e_0, e_0_true = fit["instantaneous_modulus"], E_INF + TRUE[:, 0].sum()
+        print(f"  E_0 = {e_0:.6g} Pa (true {e_0_true:.6g}), {fit['seconds'] * 1e3:.1f} ms")
 
     for name, data in (("noiseless", clean), ("0.1 % noise", noisy)):
         for n in (None, 3, "auto"):
