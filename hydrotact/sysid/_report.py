@@ -1,0 +1,225 @@
+"""What a fit leaves behind: `material.json`, `report.json` and plots.
+
+- `material.json` (data_schemas/material.schema.json): E∞ and the Prony terms with
+  standard errors, their covariance (log space), the fitted channel gains and
+  offsets, and provenance (logs with SHA-256, solver, mode, criterion).
+- `report.json`: every parameter ± standard error, the fit's statistics, residual
+  diagnostics per channel, and the criterion per number of terms when it was chosen.
+- `traces.png` (measured vs fitted), `residuals.png` (residuals in noise units over
+  time and their histogram against N(0, 1)), `relaxation.png` (E(t) with a 95 %
+  confidence band from draws of the log-space covariance).
+"""
+
+import json
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+
+from .. import __version__
+from .._files import write_text_atomic
+from ..data import make_material_document, write_material
+from ..visco import Prony
+from ._fit import FitResult
+
+_MAX_PLOTTED_CHANNELS = 8
+
+
+def _material_order(result: FitResult) -> list[int]:
+    """Indices into x of [E∞?, E₁..E_K, τ₁..τ_K] with terms sorted by τ."""
+    names = result.names
+    taus = [result.x[names.index(f"log_tau_{k + 1}")] for k in range(result.layout.num_terms)]
+    order = np.argsort(taus)
+    head = [names.index("log_long_term_modulus")] if result.layout.has_long_term else []
+    return head + [names.index(f"log_modulus_{k + 1}") for k in order] + [names.index(f"log_tau_{k + 1}") for k in order]
+
+
+def make_fit_material(result: FitResult, paths=(), name: str | None = None) -> dict:
+    """The material document of a fit (schema-checked)."""
+    terms = result.terms
+    index = _material_order(result)
+    covariance = result.covariance[np.ix_(index, index)]
+    parameters = [result.names[k] for k in index]
+    count = result.layout.num_terms
+    parameters = (["log_long_term_modulus"] if result.layout.has_long_term else []) + [f"log_modulus_{k + 1}" for k in range(count)] + [f"log_tau_{k + 1}" for k in range(count)]
+    channels = []
+    gains = result.gains
+    for info, offsets in zip(result.problem.infos, result.offsets()):
+        if len(result.problem.infos) > 1:
+            break  # offsets are per log; with several logs they stay in the report
+        for channel in info.channels:
+            entry = {"name": channel, "offset_Pa": offsets[channel].to_json()}
+            gain = gains.get(f"{info.sensor}/{channel}")
+            if gain is not None:
+                entry["gain"] = gain.to_json()
+            channels.append(entry)
+    sensors = sorted({info.sensor for info in result.problem.infos if info.sensor})
+    provenance = {
+        "method": "fit",
+        "mode": result.problem.mode,
+        "solver": result.solver,
+        "logs": [{"path": str(path), **({"sha256": info.sha256} if info.sha256 else {})} for path, info in zip(paths or [i.source for i in result.problem.infos], result.problem.infos)],
+        "num_samples": int(sum(int(log.times.shape[0]) for log in result.problem.logs)),
+        "cost": 0.5 * result.chi_square,
+    }
+    if len(sensors) == 1:
+        provenance["sensor"] = sensors[0]
+    if result.criteria:
+        provenance["criterion"] = {"name": "bic", "value": result.bic}
+    document = make_material_document(
+        result.long_term_modulus.value,
+        [m.value for m, _ in terms],
+        [t.value for _, t in terms],
+        stds={"long_term_modulus": result.long_term_modulus.std, "moduli": [m.std for m, _ in terms], "taus": [t.std for _, t in terms]},
+        covariance={"parameters": parameters, "space": "log", "matrix": covariance.tolist()} if parameters else None,
+        channels=channels or None,
+        provenance=provenance,
+        name=name,
+        description=f"Fitted by hydrotact {__version__} ({result.problem.mode} mode, {count} Prony terms, solver {result.solver}).",
+    )
+    if not result.layout.has_long_term:
+        document["modulus_scale"] = "relative"
+    return document
+
+
+def make_report(result: FitResult) -> dict:
+    """The fit's numbers as a JSON-ready dict."""
+    report = {
+        "generator": f"hydrotact {__version__}",
+        "mode": result.problem.mode,
+        "solver": result.solver,
+        "num_terms": result.layout.num_terms,
+        "converged": result.converged,
+        "num_steps": result.num_steps,
+        "seconds": result.seconds,
+        "num_residuals": result.num_residuals,
+        "num_parameters": result.layout.size,
+        "chi_square": result.chi_square,
+        "reduced_chi_square": result.reduced_chi_square,
+        "bic": result.bic,
+        "long_term_modulus_Pa": result.long_term_modulus.to_json(),
+        "instantaneous_modulus_Pa": result.instantaneous_modulus.to_json(),
+        "prony_terms": [{"modulus_Pa": m.to_json(), "tau_s": t.to_json()} for m, t in result.terms],
+        "gains": {name: estimate.to_json() for name, estimate in result.gains.items()},
+        "offsets_Pa": [{"source": info.source, "channels": {k: v.to_json() for k, v in offsets.items()}} for info, offsets in zip(result.problem.infos, result.offsets())],
+        "residuals": result.residual_diagnostics(),
+    }
+    if result.problem.mode == "lumped":
+        report["modulus_scale"] = "relative"
+        k = result.layout.num_material + result.layout.num_gains + result.layout.num_channels
+        count = result.layout.num_channels
+        labels = [n[len("log_amplitude[") : -1] for n in result.names[k : k + count]]
+        std = result.std_log
+        report["elastic_response"] = {
+            label: {
+                "amplitude_Pa": {"value": float(np.exp(result.x[k + c])), "std": float(np.exp(result.x[k + c]) * std[k + c])},
+                "exponent": {"value": float(np.exp(result.x[k + count + c])), "std": float(np.exp(result.x[k + count + c]) * std[k + count + c])},
+            }
+            for c, label in enumerate(labels)
+        }
+    if result.criteria:
+        report["criterion"] = {"name": "bic", "by_num_terms": {str(k): v for k, v in result.criteria.items()}}
+    return report
+
+
+def calc_relaxation_band(result: FitResult, times, draws: int = 400, seed: int = 0):
+    """E(t) at `times` and its 2.5 / 97.5 % band from draws of the material's
+    log-space covariance (NumPy)."""
+    index = _material_order(result)
+    mean = result.x[index]
+    covariance = result.covariance[np.ix_(index, index)]
+    rng = np.random.default_rng(seed)
+    samples = rng.multivariate_normal(mean, covariance, size=draws, method="eigh") if len(index) else np.zeros((draws, 0))
+    head = int(result.layout.has_long_term)
+    count = result.layout.num_terms
+
+    def modulus(x):
+        long_term = np.exp(x[0]) if head else 1.0
+        prony = Prony(jnp.asarray(long_term), jnp.exp(jnp.asarray(x[head : head + count])), jnp.exp(jnp.asarray(x[head + count :])))
+        return np.asarray(prony.calc_relaxation_modulus(times))
+
+    curves = np.array([modulus(x) for x in samples])
+    return modulus(mean), np.percentile(curves, 2.5, axis=0), np.percentile(curves, 97.5, axis=0)
+
+
+def plot_fit(result: FitResult, out_dir) -> dict:
+    """traces.png, residuals.png and relaxation.png in out_dir; returns their paths."""
+    import matplotlib.pyplot as plt
+
+    from ..viz import save_figure
+
+    out_dir = Path(out_dir)
+    paths = {"traces_png": out_dir / "traces.png", "residuals_png": out_dir / "residuals.png", "relaxation_png": out_dir / "relaxation.png"}
+    predictions = result.predictions()
+    logs = result.problem.logs
+    infos = result.problem.infos
+
+    # Measured vs fitted: the channels that move most, per log.
+    figure, axes = plt.subplots(len(logs), 1, figsize=(10, 3.6 * len(logs)), squeeze=False)
+    for axis, log, info, prediction in zip(axes[:, 0], logs, infos, predictions):
+        observed = np.asarray(log.observed)
+        times = np.asarray(log.times)
+        count = log.num_channels
+        spread = observed[:, :count].max(axis=0) - observed[:, :count].min(axis=0)
+        for c in np.argsort(spread)[::-1][:_MAX_PLOTTED_CHANNELS]:
+            base = observed[0, c]
+            line = axis.plot(times, (observed[:, c] - base) / 1e3, lw=0.8, alpha=0.6)[0]
+            axis.plot(times, (prediction[:, c] - base) / 1e3, "--", lw=1.0, color=line.get_color(), label=info.channels[c])
+        axis.set_ylabel("reading − first sample [kPa]")
+        axis.set_title(f"{info.source}: measured (solid) and fitted (dashed)", fontsize=9)
+        axis.legend(ncol=4, fontsize=7)
+    axes[-1, 0].set_xlabel("time [s]")
+    figure.tight_layout()
+    save_figure(figure, paths["traces_png"])
+
+    # Residuals in noise units.
+    figure, (left, right) = plt.subplots(1, 2, figsize=(11, 3.6), gridspec_kw={"width_ratios": [3, 1]})
+    everything = []
+    for log, info, prediction in zip(logs, infos, predictions):
+        normalised = (np.asarray(log.observed) - prediction) * np.asarray(log.weights)
+        everything.append(normalised.reshape(-1))
+        for c, name in enumerate((info.channels + info.force_columns)[:_MAX_PLOTTED_CHANNELS]):
+            left.plot(np.asarray(log.times), normalised[:, c], lw=0.4, alpha=0.7, label=name)
+    left.set_xlabel("time [s]")
+    left.set_ylabel("residual / noise σ")
+    left.set_title(f"residuals (reduced χ² = {result.reduced_chi_square:.3f})", fontsize=9)
+    everything = np.concatenate(everything)
+    grid = np.linspace(-5, 5, 201)
+    right.hist(np.clip(everything, -5, 5), bins=60, density=True, alpha=0.6)
+    right.plot(grid, np.exp(-0.5 * grid**2) / np.sqrt(2 * np.pi), "k", lw=1, label="N(0, 1)")
+    right.set_xlabel("residual / noise σ")
+    right.legend(fontsize=7)
+    figure.tight_layout()
+    save_figure(figure, paths["residuals_png"])
+
+    # Relaxation modulus with its confidence band.
+    span = max(float(log.times[-1] - log.times[0]) for log in logs)
+    step = min(float(np.min(np.diff(np.asarray(log.times)))) for log in logs)
+    times = np.logspace(np.log10(step / 2), np.log10(span * 2), 200)
+    modulus, low, high = calc_relaxation_band(result, times)
+    unit, label = (1e3, "E(t) [kPa]") if result.layout.has_long_term else (1.0, "E(t) / E∞")
+    figure, axis = plt.subplots(figsize=(6.5, 4))
+    axis.fill_between(times, low / unit, high / unit, alpha=0.3, label="95 % band")
+    axis.semilogx(times, modulus / unit, "k", lw=1.2, label="fitted")
+    for _, tau in result.terms:
+        axis.axvline(tau.value, color="grey", lw=0.6, ls=":")
+    axis.set_xlabel("time [s]")
+    axis.set_ylabel(label)
+    axis.set_title(f"relaxation modulus, {result.layout.num_terms} Prony terms", fontsize=9)
+    axis.legend(fontsize=8)
+    figure.tight_layout()
+    save_figure(figure, paths["relaxation_png"])
+    return {key: str(path) for key, path in paths.items()}
+
+
+def write_fit_outputs(result: FitResult, out_dir, paths=()) -> dict:
+    """material.json, report.json and the plots in out_dir (each written atomically)."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    files = {"material": str(out_dir / "material.json"), "report": str(out_dir / "report.json")}
+    write_material(files["material"], make_fit_material(result, paths))
+    report = make_report(result)
+    files.update(plot_fit(result, out_dir))
+    report["files"] = files
+    write_text_atomic(files["report"], json.dumps(report, indent=2) + "\n")
+    return report
