@@ -72,6 +72,19 @@ def _parser() -> argparse.ArgumentParser:
     simulate.add_argument("--png", type=Path, metavar="LOG.png", help="plot the simulated traces")
     simulate.add_argument("--json", action="store_true", help="print the report as JSON")
 
+    fit = commands.add_parser("fit", help="fit the elastomer's Prony material (and channel gains and offsets) to barometer logs")
+    fit.add_argument("logs", nargs="+", type=Path, metavar="LOG", help="barometer logs (.parquet, or .csv with its .json or a --mapping); several are fitted jointly")
+    fit.add_argument("--sensor", metavar="S", help="the sensor spec (built-in name or JSON file); default: the log's own")
+    fit.add_argument("--lumped", action="store_true", help="no sensor model: each channel a power law of the indentation column, fitted with the kernel")
+    fit.add_argument("--indentation", default="indentation", metavar="COL", help="the indentation column of a --lumped fit (default indentation)")
+    fit.add_argument("--mapping", type=Path, metavar="MAP.json", help="column mapping for logs of your own layout")
+    fit.add_argument("--terms", default="auto", metavar="N|auto", help="Prony terms, or auto (lowest BIC over 0-4; default)")
+    fit.add_argument("--solver", default="lm", choices=["lm", "gn", "dogleg", "bfgs", "lbfgsb"], help="lm (Levenberg-Marquardt, default), gn, dogleg, bfgs or lbfgsb (jaxopt, bounded)")
+    fit.add_argument("--field", choices=["laplace", "distance"], help="full mode: the sensor's strain field (default: the log's, else laplace)")
+    fit.add_argument("--rays", type=int, metavar="N", help="full mode: rays per taxel (default: the log's, else 64)")
+    fit.add_argument("-o", "--output", required=True, type=Path, metavar="FITDIR", help="folder for material.json, report.json and plots")
+    fit.add_argument("--json", action="store_true", help="print the report as JSON")
+
     demo = commands.add_parser("demo", help="the built-in demonstration: writes results and pictures to out/")
     demo.add_argument("-o", "--output", type=Path, default=Path("out"), metavar="DIR")
     return parser
@@ -108,6 +121,25 @@ def _run(args) -> None:
                   f"({field['cg_iterations']} CG iterations, residual {field['residual_norm']:.1e})")
             for path in sensor["files"].values():
                 print(f"    {path}")
+        return
+
+    if args.command == "fit":
+        from ._fit_job import print_fit_table, run_fit
+
+        def warn(message):
+            print(f"hydrotact: warning: {message}", file=sys.stderr)
+
+        report = run_fit(
+            args.logs, args.output, sensor=args.sensor, lumped=args.lumped, indentation=args.indentation, mapping=args.mapping,
+            terms=args.terms, solver=args.solver, field=args.field, num_rays=args.rays, progress=not args.json, report_warning=warn,
+        )
+        if args.json:
+            print(json.dumps(report, indent=2))
+        else:
+            print_fit_table(report)
+            print(f"hydrotact fit: results in {args.output}/")
+            for path in report["files"].values():
+                print(f"  {path}")
         return
 
     from .mesh import calc_mesh_quality, write_mesh
