@@ -1,0 +1,458 @@
+"""System identification (hydrotact.sysid) on synthetic logs with a known material.
+
+The logs (tests/sysid_synthetic.py) need no contact simulation: a press / hold /
+release indentation history, unit responses ∝ depth^1.5, the exact hereditary
+integral of the true Prony series, and the BMP388 signal model with channel gains,
+offsets, 2 Pa white noise (a barometer cast in silicone) and the part's 0.016 Pa
+quantisation; the reference force has 5 mN noise. Fits are shared through
+module-scoped fixtures: each new problem shape compiles the solve once.
+
+Known bugs worked around here: hydrotact.visco (and so the fit model) broadcasts by
+implicit rank promotion, which tests/conftest.py makes an error (the strict xfails in
+tests/test_visco.py), so this module allows it; FitProblem's static `infos` carry each
+log's noise estimate, so a new log of the same shapes recompiles the solve (the strict
+xfail test_refit_of_same_shape_reuses_compiled_solve); importing jaxopt warns.
+"""
+
+import contextlib
+import json
+import warnings
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+with warnings.catch_warnings():
+    # jaxopt (the L-BFGS-B solver) warns on import that it is unmaintained.
+    warnings.filterwarnings("ignore", "JAXopt is no longer maintained", DeprecationWarning)
+    import jaxopt  # noqa: F401
+
+from hydrotact import HydrotactError
+from hydrotact.data import BarometerLog, read_material
+from hydrotact.sysid import FitProblem, fit_auto, fit_parameters, fit_problem, fit_relaxation_curve, make_fit_problem, make_initial_guess
+from hydrotact.visco import make_prony
+from sysid_synthetic import FullLogMaker, make_lumped_log
+
+# E∞ and three well-separated terms (0.3, 3, 30 s).
+TRUTH_3 = dict(long_term_modulus=6e5, moduli=[2.5e5, 1.5e5, 1.0e5], taus=[0.3, 3.0, 30.0])
+TRUTH_2 = dict(long_term_modulus=6e5, moduli=[2.5e5, 1.5e5], taus=[0.5, 8.0])
+COVERAGE_SEEDS = 50
+
+
+def _prony(truth):
+    return make_prony(truth["long_term_modulus"], truth["moduli"], truth["taus"])
+
+
+def _material_estimates(result):
+    """[E∞, E₁.., τ₁..] estimates (terms sorted by τ) of a FitResult."""
+    return [result.long_term_modulus] + [m for m, _ in result.terms] + [t for _, t in result.terms]
+
+
+def _material_truth(truth):
+    return [truth["long_term_modulus"], *truth["moduli"], *truth["taus"]]
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _allow_rank_promotion():
+    """Work-around for the rank-promotion bug of hydrotact.visco (see
+    tests/test_visco.py); remove when its xfails start passing."""
+    with jax.numpy_rank_promotion("allow"):
+        yield
+
+
+@contextlib.contextmanager
+def count_compilations():
+    """Collects one entry per XLA backend compilation inside the block."""
+    compilations = []
+
+    def listener(event, duration, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compilations.append(duration)
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        yield compilations
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+
+
+# --- shared logs and fits -------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def maker_3():
+    """3 terms, 4 channels, 180 s at 50 Hz, holds up to 40 s (to see τ = 30 s)."""
+    return FullLogMaker(_prony(TRUTH_3), duration=180.0, rate_hz=50.0, num_channels=4, trajectory_seed=3, holds=(2.0, 40.0))
+
+
+@pytest.fixture(scope="module")
+def problem_3(maker_3):
+    return make_fit_problem([maker_3.make(0)], unit_responses=maker_3.unit_responses)
+
+
+@pytest.fixture(scope="module")
+def result_3(problem_3):
+    return fit_problem(problem_3, 3, "lm")
+
+
+@pytest.fixture(scope="module")
+def maker_2():
+    """2 terms, 4 channels, 90 s at 50 Hz: the coverage study's log."""
+    return FullLogMaker(_prony(TRUTH_2), duration=90.0, rate_hz=50.0, num_channels=4, trajectory_seed=0)
+
+
+@pytest.fixture(scope="module")
+def problem_2(maker_2):
+    return make_fit_problem([maker_2.make(0)], unit_responses=maker_2.unit_responses)
+
+
+LUMPED_AMPLITUDES = np.array([800.0, 1500.0, 400.0])  # Pa at the deepest indentation
+LUMPED_EXPONENTS = np.array([1.5, 1.3, 1.7])
+
+
+@pytest.fixture(scope="module")
+def lumped_result():
+    relative = make_prony(1.0, np.asarray(TRUTH_3["moduli"]) / TRUTH_3["long_term_modulus"], TRUTH_3["taus"])
+    log = make_lumped_log(relative, LUMPED_AMPLITUDES, LUMPED_EXPONENTS, duration=180.0, rate_hz=50.0, seed=5, holds=(2.0, 40.0))
+    return fit_problem(make_fit_problem([log], mode="lumped"), 3, "lm")
+
+
+# --- 1. known-truth recovery ------------------------------------------------------------
+
+
+def test_recovers_known_material(result_3):
+    """Full mode, lm: E∞ within 1 %, each Eᵢ and τᵢ within 5 % (0.3 / 3 / 30 s)."""
+    result = result_3
+    assert result.converged
+    assert 0.9 < result.reduced_chi_square < 1.1
+    estimates = _material_estimates(result)
+    truth = _material_truth(TRUTH_3)
+    assert abs(estimates[0].value / truth[0] - 1.0) < 0.01, estimates[0]
+    for estimate, value in zip(estimates[1:], truth[1:]):
+        assert abs(estimate.value / value - 1.0) < 0.05, (estimate, value)
+
+
+def test_standard_errors_are_consistent(result_3, maker_3):
+    """|estimate − truth| < 5σ for the material and the channel gains; σ > 0."""
+    estimates = _material_estimates(result_3) + list(result_3.gains.values())
+    truth = _material_truth(TRUTH_3) + list(maker_3.gains)
+    assert len(result_3.gains) == 4
+    for estimate, value in zip(estimates, truth):
+        assert estimate.std > 0.0
+        assert abs(estimate.value - value) < 5.0 * estimate.std, (estimate, value)
+    # The covariance is symmetric, positive semidefinite, in log space.
+    covariance = result_3.covariance
+    np.testing.assert_allclose(covariance, covariance.T, rtol=0, atol=1e-12 * np.abs(covariance).max())
+    assert np.linalg.eigvalsh(covariance).min() > -1e-12 * np.abs(covariance).max()
+
+
+# --- 2. coverage of the 1σ intervals ------------------------------------------------------
+
+
+def test_one_sigma_coverage(maker_2, problem_2):
+    """Over 50 noise seeds (same trajectory and truth), the true value lies within
+    the reported 1σ interval for 55-80 % of the fits, pooled over the material
+    parameters E∞, E₁, E₂, τ₁, τ₂ (250 intervals; each parameter alone must stay
+    within 50-90 %, a guard against one parameter's σ being far off that the pooled
+    number could hide: 50 draws of a 68 % event fall outside 55-80 % too often to
+    test parameters one by one).
+
+    Each seed's problem reuses the first one's static `infos`, so the 49 refits
+    compile nothing (checked): see test_refit_of_same_shape_reuses_compiled_solve.
+    """
+    truth = np.array(_material_truth(TRUTH_2))
+    inside = []
+    with count_compilations() as compilations:
+        for seed in range(COVERAGE_SEEDS):
+            problem = make_fit_problem([maker_2.make(seed)], unit_responses=maker_2.unit_responses)
+            problem = FitProblem(logs=problem.logs, mode=problem.mode, gain_names=problem.gain_names, infos=problem_2.infos)
+            result = fit_problem(problem, 2, "lm")
+            assert result.converged, seed
+            estimates = _material_estimates(result)
+            values = np.array([e.value for e in estimates])
+            stds = np.array([e.std for e in estimates])
+            inside.append(np.abs(values - truth) < stds)
+            if seed == 0:
+                first = len(compilations)
+    inside = np.array(inside)
+    per_parameter = inside.mean(axis=0)
+    pooled = inside.mean()
+    assert 0.55 <= pooled <= 0.80, (pooled, per_parameter)
+    assert np.all((per_parameter >= 0.5) & (per_parameter <= 0.9)), per_parameter
+    assert len(compilations) == first, f"{len(compilations) - first} compilations after the first seed"
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason="FitProblem.infos is static and holds each log's noise estimate (and source), so every new log recompiles the solve")
+def test_refit_of_same_shape_reuses_compiled_solve(maker_2, problem_2):
+    """A new log of the same shapes, through the public calls, compiles nothing."""
+    fit_problem(problem_2, 2, "lm")
+    log = maker_2.make(1000)
+    with count_compilations() as compilations:
+        fit_problem(make_fit_problem([log], unit_responses=maker_2.unit_responses), 2, "lm")
+    assert not compilations, f"{len(compilations)} compilations"
+
+
+# --- 3. solvers agree ----------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def small_problem():
+    """2 terms, 2 channels, 40 s at 25 Hz."""
+    maker = FullLogMaker(_prony(TRUTH_2), duration=40.0, rate_hz=25.0, num_channels=2, trajectory_seed=1, holds=(2.0, 15.0), gaps=(2.0, 8.0))
+    return make_fit_problem([maker.make(0)], unit_responses=maker.unit_responses)
+
+
+@pytest.fixture(scope="module")
+def small_lm(small_problem):
+    return fit_problem(small_problem, 2, "lm")
+
+
+@pytest.mark.parametrize("solver", ["gn", "dogleg", "bfgs", "lbfgsb"])
+def test_solvers_reach_the_same_minimum(small_problem, small_lm, solver):
+    result = fit_problem(small_problem, 2, solver)
+    assert small_lm.converged and result.converged
+    assert abs(result.chi_square / small_lm.chi_square - 1.0) < 1e-6, (result.chi_square, small_lm.chi_square)
+    for ours, reference in zip(_material_estimates(result), _material_estimates(small_lm)):
+        assert abs(ours.value - reference.value) < 0.01 * reference.std
+
+
+# --- 4. the number of terms ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("case", ["two terms", "three terms"])
+def test_fit_auto_picks_true_number_of_terms(case, request):
+    problem, true_terms, max_terms = {"two terms": ("problem_2", 2, 3), "three terms": ("problem_3", 3, 4)}[case]
+    problem = request.getfixturevalue(problem)
+    result = fit_auto(problem, "lm", max_terms=max_terms)
+    assert sorted(result.criteria) == list(range(max_terms + 1))
+    assert all(np.isfinite(v) for v in result.criteria.values())
+    assert result.layout.num_terms == true_terms, result.criteria
+    assert min(result.criteria, key=result.criteria.get) == true_terms
+    assert result.bic == result.criteria[true_terms]
+
+
+# --- 5. lumped mode ----------------------------------------------------------------------------
+
+
+def test_lumped_recovers_power_law_and_kernel_shape(lumped_result):
+    """Per-channel amplitude and exponent (1.5, 1.3, 1.7) and Eᵢ/E∞, τᵢ within 5 %."""
+    result = lumped_result
+    assert result.converged
+    assert result.long_term_modulus.value == 1.0 and not result.layout.has_long_term
+    ratios = np.asarray(TRUTH_3["moduli"]) / TRUTH_3["long_term_modulus"]
+    for (modulus, tau), ratio, true_tau in zip(result.terms, ratios, TRUTH_3["taus"]):
+        assert abs(modulus.value / ratio - 1.0) < 0.05, (modulus, ratio)
+        assert abs(tau.value / true_tau - 1.0) < 0.05, (tau, true_tau)
+    amplitudes = np.exp([result.x[result.names.index(f"log_amplitude[1/b{c}]")] for c in range(3)])
+    exponents = np.exp([result.x[result.names.index(f"log_exponent[1/b{c}]")] for c in range(3)])
+    np.testing.assert_allclose(amplitudes, LUMPED_AMPLITUDES, rtol=0.05)
+    np.testing.assert_allclose(exponents, LUMPED_EXPONENTS, rtol=0.05)
+
+
+# --- 6. implicit gradient through the solve ------------------------------------------------------
+
+
+def test_fit_parameters_gradient_matches_refits():
+    """d(v · x̂)/d(observed) by jax.grad through fit_parameters (implicit function
+    theorem) matches central differences of refits at a few data entries; v is a
+    fixed random direction over all parameters (material, gains, offsets)."""
+    truth = make_prony(6e5, [3e5], [0.5])
+    maker = FullLogMaker(truth, duration=6.0, rate_hz=50.0, num_channels=2, trajectory_seed=2, holds=(0.5, 1.5), gaps=(0.5, 1.0))
+    problem = make_fit_problem([maker.make(0)], unit_responses=maker.unit_responses)
+    assert problem.logs[0].observed.shape == (300, 3)
+    layout, x0 = make_initial_guess(problem, 1)
+    x0 = jnp.asarray(x0)
+    direction = jnp.asarray(np.random.default_rng(0).normal(size=layout.size))
+
+    @eqx.filter_jit
+    def fitted(observed):
+        swapped = eqx.tree_at(lambda p: p.logs[0].observed, problem, observed)
+        return direction @ fit_parameters(swapped, layout, x0, "lm", rtol=1e-14, atol=1e-14, max_steps=200)
+
+    observed = problem.logs[0].observed
+    gradient = np.asarray(jax.grad(fitted)(observed))
+    assert gradient.shape == observed.shape and np.all(np.isfinite(gradient))
+    # The entry of each column with the largest gradient, and two on a ramp. Steps of
+    # one noise σ (2 Pa, 5 mN): the refits agree to ~1e-9 relative (LM's Cholesky on
+    # the normal equations), so smaller steps drown in solver noise, while the
+    # fitted parameters stay linear in the data to ~1e-9 over such steps.
+    depth = maker.depth
+    ramp = int(np.flatnonzero((depth > 0) & (depth < depth.max()))[0]) + 3
+    entries = [(int(np.argmax(np.abs(gradient[:, column]))), column) for column in range(3)] + [(ramp, 1), (ramp + 100, 2)]
+    for sample, column in entries:
+        step = 2.0 if column < 2 else 5e-3
+        bump = jnp.zeros_like(observed).at[sample, column].set(step)
+        difference = (float(fitted(observed + bump)) - float(fitted(observed - bump))) / (2.0 * step)
+        np.testing.assert_allclose(gradient[sample, column], difference, rtol=1e-4, err_msg=f"sample {sample} column {column}")
+
+
+# --- 7. relaxation curves and pyvisco ----------------------------------------------------------------
+
+RELAXATION_INF = 1e6
+RELAXATION_TERMS = np.array([[3e5, 0.05], [2e5, 1.0], [1e5, 20.0]])  # (Eᵢ Pa, τᵢ s)
+
+
+def _relaxation_curve():
+    times = np.geomspace(1e-3, 1e3, 200)
+    moduli, taus = RELAXATION_TERMS.T
+    return times, RELAXATION_INF + np.exp(-times[:, None] / taus[None, :]) @ moduli
+
+
+def _relaxation_truth():
+    return np.concatenate([[RELAXATION_INF], RELAXATION_TERMS[:, 0], RELAXATION_TERMS[:, 1]])
+
+
+def test_relaxation_curve_exact_on_noiseless_data():
+    times, modulus = _relaxation_curve()
+    fit = fit_relaxation_curve(times, modulus, 3)
+    assert fit.converged
+    values = np.array([fit.long_term_modulus.value] + [m.value for m, _ in fit.terms] + [t.value for _, t in fit.terms])
+    np.testing.assert_allclose(values, _relaxation_truth(), rtol=1e-8)
+    assert fit.residual_rms < 1e-8 * RELAXATION_INF
+
+
+def test_relaxation_curve_no_worse_than_pyvisco():
+    """Same curve, 0.1 % relative noise, three terms: our largest and RMS relative
+    parameter error and our RMS residual are no worse than pyvisco's."""
+    pytest.importorskip("pyvisco")
+    from pyvisco_reference import fit_prony_pyvisco
+
+    times, clean = _relaxation_curve()
+    noisy = clean * (1.0 + 1e-3 * np.random.default_rng(0).standard_normal(times.size))
+    truth = _relaxation_truth()
+    fit = fit_relaxation_curve(times, noisy, 3)
+    ours = np.array([fit.long_term_modulus.value] + [m.value for m, _ in fit.terms] + [t.value for _, t in fit.terms])
+    reference = fit_prony_pyvisco(times, noisy, 3)
+    theirs = np.concatenate([[reference["long_term_modulus"]], reference["moduli"], reference["taus"]])
+    our_errors, their_errors = np.abs(ours / truth - 1.0), np.abs(theirs / truth - 1.0)
+    assert our_errors.max() <= their_errors.max(), (our_errors, their_errors)
+    assert np.sqrt(np.mean(our_errors**2)) <= np.sqrt(np.mean(their_errors**2)), (our_errors, their_errors)
+    assert fit.residual_rms <= reference["residual_rms"], (fit.residual_rms, reference["residual_rms"])
+    # Our standard errors cover the truth (0.1 % noise: errors of ~1e-3 relative).
+    stds = np.array([fit.long_term_modulus.std] + [m.std for m, _ in fit.terms] + [t.std for _, t in fit.terms])
+    assert np.all(np.abs(ours - truth) < 5.0 * stds), ((ours - truth) / stds)
+
+
+# --- 8. bad input ----------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def tiny_maker():
+    return FullLogMaker(_prony(TRUTH_2), duration=6.0, rate_hz=20.0, num_channels=2, trajectory_seed=4, holds=(0.5, 1.5), gaps=(0.5, 1.0))
+
+
+def _assert_one_line(error, *fragments):
+    message = str(error.value)
+    assert "\n" not in message, message
+    for fragment in fragments:
+        assert fragment in message, (fragment, message)
+
+
+def test_unknown_mode(tiny_maker):
+    with pytest.raises(HydrotactError) as error:
+        make_fit_problem([tiny_maker.make(0)], mode="elastic", unit_responses=tiny_maker.unit_responses)
+    _assert_one_line(error, "unknown fit mode 'elastic'", "full", "lumped")
+
+
+def test_lumped_without_indentation_column(tiny_maker):
+    log = tiny_maker.make(0)
+    columns = {k: v for k, v in log.columns.items() if k != "indentation"}
+    with pytest.raises(HydrotactError) as error:
+        make_fit_problem([BarometerLog(log.metadata, columns)], mode="lumped", sources=["press.parquet"])
+    _assert_one_line(error, "press.parquet", "no indentation column 'indentation'")
+    with pytest.raises(HydrotactError) as error:
+        make_fit_problem([log], mode="lumped", indentation="depth")
+    _assert_one_line(error, "'depth'", "indentation")
+
+
+def test_indentation_never_positive(tiny_maker):
+    log = tiny_maker.make(0)
+    columns = dict(log.columns, indentation=-np.abs(log.columns["indentation"]))
+    with pytest.raises(HydrotactError) as error:
+        make_fit_problem([BarometerLog(log.metadata, columns)], mode="lumped")
+    _assert_one_line(error, "'indentation'", "never positive")
+
+
+def test_too_few_samples(tiny_maker):
+    log = tiny_maker.make(0)
+    columns = {k: v[:5] for k, v in log.columns.items()}
+    with pytest.raises(HydrotactError) as error:
+        make_fit_problem([BarometerLog(log.metadata, columns)], mode="lumped")
+    _assert_one_line(error, "5 samples", "at least 8")
+
+
+def test_unit_responses_of_wrong_shape(tiny_maker):
+    unit, force = tiny_maker.unit_responses[0]
+    log = tiny_maker.make(0)
+    for responses in [(unit[:, :1], force), (unit, force[:, :2]), (unit[:-1], force[:-1])]:
+        with pytest.raises(HydrotactError) as error:
+            make_fit_problem([log], unit_responses=[responses])
+        _assert_one_line(error, "unit responses", "do not match")
+
+
+def test_no_logs():
+    with pytest.raises(HydrotactError) as error:
+        make_fit_problem([], mode="lumped")
+    _assert_one_line(error, "no logs")
+
+
+@pytest.mark.parametrize(("solver", "num_terms", "fragments"), [("newton", 1, ("unknown solver 'newton'", "lm", "lbfgsb")), ("lm", -1, ("0 or more", "-1"))])
+def test_fit_problem_bad_arguments(tiny_maker, solver, num_terms, fragments):
+    problem = make_fit_problem([tiny_maker.make(0)], unit_responses=tiny_maker.unit_responses)
+    with pytest.raises(HydrotactError) as error:
+        fit_problem(problem, num_terms, solver)
+    _assert_one_line(error, *fragments)
+
+
+@pytest.mark.parametrize(("times", "modulus", "fragment"), [([0.0, 1.0, 2.0], [3.0, 2.0, 1.0], "at least 4"), ([0.0, 1.0, 2.0, 3.0], [3.0, 2.0, 0.0, 1.0], "positive moduli")])
+def test_relaxation_curve_bad_input(times, modulus, fragment):
+    with pytest.raises(HydrotactError) as error:
+        fit_relaxation_curve(times, modulus, 1)
+    _assert_one_line(error, fragment)
+
+
+# --- 9. outputs ---------------------------------------------------------------------------------------------
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def _check_outputs(result, out_dir):
+    from hydrotact.sysid import write_fit_outputs
+
+    report = write_fit_outputs(result, out_dir)
+    material = read_material(out_dir / "material.json")
+    saved = json.loads((out_dir / "report.json").read_text())
+    assert saved["files"] == report["files"]
+    for name in ("traces.png", "residuals.png", "relaxation.png"):
+        data = (out_dir / name).read_bytes()
+        assert data.startswith(PNG_SIGNATURE) and len(data) > 1000, name
+    assert material["long_term_modulus_Pa"]["value"] == pytest.approx(result.long_term_modulus.value, rel=1e-12)
+    for term, (modulus, tau) in zip(material["prony_terms"], result.terms, strict=True):
+        assert term["modulus_Pa"]["value"] == pytest.approx(modulus.value, rel=1e-12)
+        assert term["tau_s"]["value"] == pytest.approx(tau.value, rel=1e-12)
+        assert term["tau_s"]["std"] == pytest.approx(tau.std, rel=1e-12)
+    assert saved["num_terms"] == result.layout.num_terms
+    assert saved["reduced_chi_square"] == pytest.approx(result.reduced_chi_square)
+    return material, saved
+
+
+def test_write_fit_outputs_full(result_3, tmp_path):
+    material, report = _check_outputs(result_3, tmp_path)
+    assert "modulus_scale" not in material
+    assert material["long_term_modulus_Pa"]["std"] > 0.0
+    assert [channel["name"] for channel in material["channels"]] == [f"b{k}" for k in range(4)]
+    assert all("gain" in channel for channel in material["channels"])
+    covariance = material["covariance"]
+    assert covariance["space"] == "log" and len(covariance["parameters"]) == 7
+    assert report["mode"] == "full" and report["converged"]
+
+
+def test_write_fit_outputs_lumped(lumped_result, tmp_path):
+    material, report = _check_outputs(lumped_result, tmp_path)
+    assert material["modulus_scale"] == "relative"
+    assert material["long_term_modulus_Pa"]["value"] == 1.0
+    assert report["modulus_scale"] == "relative"
+    exponents = [report["elastic_response"][f"1/b{c}"]["exponent"]["value"] for c in range(3)]
+    np.testing.assert_allclose(exponents, LUMPED_EXPONENTS, rtol=0.05)
