@@ -12,9 +12,8 @@ p(t) = ∫ E(t − s) du(s), E(t) = E∞ + Σᵢ Eᵢ exp(−t/τᵢ), not from 
 - a direct O(T²) sum over the linear pieces is a second implementation;
 - the two scan methods agree; jit, vmap and grad (against central differences) work.
 
-Known bugs (see the strict xfails): the kernels rely on implicit rank promotion, which
-tests/conftest.py makes an error, so the module fixture below allows it for the
-numerical checks; `method="associative"` fails on a single sample.
+Everything runs with implicit rank promotion raising (tests/conftest.py); one sample
+works with either method.
 """
 
 import math
@@ -48,15 +47,6 @@ TAUS = (0.03, 0.25, 1.5)
 _response = jax.jit(calc_hereditary_integral, static_argnames="method")
 _readings = jax.jit(calc_barometer_readings, static_argnames="quantise")
 _resampled = jax.jit(calc_resampled)
-
-
-@pytest.fixture(autouse=True)
-def _allow_rank_promotion():
-    """Work-around for the rank-promotion bug (test_*_rank_promotion below): the
-    numerical checks run with implicit rank promotion allowed. Remove this fixture
-    when those xfails start passing."""
-    with jax.numpy_rank_promotion("allow"):
-        yield
 
 
 @pytest.fixture
@@ -173,31 +163,21 @@ def test_relaxation_modulus_at_array_times(prony, rng):
 
 # --- the known bugs -------------------------------------------------------------------
 
-_RANK_BUG = (
-    "bug: the kernels broadcast by implicit rank promotion ((T, 1) / (K,) in "
-    "_step_coefficients and calc_relaxation_modulus; offsets (C,) + gains (C,) * (S, C) and "
-    "drift (C,) * (S, 1) in calc_barometer_readings), which tests/conftest.py makes an error"
-)
-
-
-@pytest.mark.xfail(strict=True, raises=ValueError, reason=_RANK_BUG)
 def test_relaxation_modulus_rank_promotion(prony):
     with jax.numpy_rank_promotion("raise"):
-        prony.calc_relaxation_modulus(np.linspace(0.0, 1.0, 5))
+        assert prony.calc_relaxation_modulus(np.linspace(0.0, 1.0, 5)).shape == (5,)
 
 
 @pytest.mark.parametrize("method", METHODS)
-@pytest.mark.xfail(strict=True, raises=ValueError, reason=_RANK_BUG)
 def test_hereditary_integral_rank_promotion(prony, method):
     with jax.numpy_rank_promotion("raise"):
-        calc_hereditary_integral(prony, np.linspace(0.0, 1.0, 5), np.ones((5, 2)), method=method)
+        assert calc_hereditary_integral(prony, np.linspace(0.0, 1.0, 5), np.ones((5, 2)), method=method).shape == (5, 2)
 
 
-@pytest.mark.xfail(strict=True, raises=ValueError, reason=_RANK_BUG)
 def test_barometer_readings_rank_promotion():
     signal = make_barometer_signal(known_parts()["BMP388"], 3)
     with jax.numpy_rank_promotion("raise"):
-        calc_barometer_readings(signal, jnp.linspace(0.0, 0.1, 11), jnp.zeros((11, 3)))
+        assert calc_barometer_readings(signal, jnp.linspace(0.0, 0.1, 11), jnp.zeros((11, 3))).shape == (11, 3)
 
 
 def test_resampled_and_scalar_modulus_without_rank_promotion(prony):
@@ -208,12 +188,6 @@ def test_resampled_and_scalar_modulus_without_rank_promotion(prony):
         prony.calc_relaxation_modulus(0.5)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=IndexError,
-    reason="bug: method='associative' with one sample (T = 1) indexes drive[0] of an empty "
-    "array (IndexError); method='scan' returns E(0) u0",
-)
 def test_single_sample_associative(prony):
     response = calc_hereditary_integral(prony, np.array([0.0]), np.ones((1, 2)), method="associative")
     np.testing.assert_allclose(response, E_INF + sum(MODULI), rtol=1e-15)
@@ -545,7 +519,7 @@ def test_readings_scale_with_gains(rng, part):
     samples = jnp.asarray(calc_sample_times(np.array([0.0, 0.5]), signal.rate_hz))
     pressures = rng.uniform(0.0, 2e3, size=(len(samples), 3))
     readings = _readings(signal, samples, jnp.asarray(pressures), quantise=False)
-    np.testing.assert_allclose(readings - 101325.0 - np.array([1.0, 2.0, 3.0]), gains * pressures, rtol=1e-9)
+    np.testing.assert_allclose(np.asarray(readings) - 101325.0 - np.array([1.0, 2.0, 3.0]), gains * pressures, rtol=1e-9)
     quantised = _readings(signal, samples, jnp.asarray(pressures))
     assert np.max(np.abs(np.asarray(quantised) - np.asarray(readings))) <= 0.008 + 1e-9
 
@@ -632,12 +606,6 @@ def test_signal_allows_zero_noise(part):
     np.testing.assert_array_equal(noisy, _readings(signal, samples, jnp.zeros((6, 2))))
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=ValueError,
-    reason="bug: a per-channel list of the wrong length (3 channels, 2 gains) reaches "
-    "np.broadcast_to and raises numpy's ValueError, not a HydrotactError naming the field",
-)
 def test_signal_rejects_wrong_channel_count(part):
     with pytest.raises(HydrotactError, match="gains"):
         make_barometer_signal(part, 3, gains=[1.0, 2.0])

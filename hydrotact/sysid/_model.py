@@ -86,8 +86,8 @@ def make_layout(problem: FitProblem, num_terms: int) -> ParameterLayout:
 def _lumped_inputs(depth, amplitudes, exponents):
     """a_c · δ^b_c for δ (T, 1) ≥ 0, with finite gradients at δ = 0."""
     positive = depth > 0.0
-    power = jnp.exp(exponents * jnp.log(jnp.where(positive, depth, 1.0)))
-    return amplitudes * jnp.where(positive, power, 0.0)
+    power = jnp.exp(exponents[None, :] * jnp.log(jnp.where(positive, depth, 1.0)))
+    return amplitudes[None, :] * jnp.where(positive, power, 0.0)
 
 
 def calc_predictions(x, problem: FitProblem, layout: ParameterLayout, method: str = "scan"):
@@ -106,7 +106,7 @@ def calc_predictions(x, problem: FitProblem, layout: ParameterLayout, method: st
         first += count
         response = calc_hereditary_integral(prony, log.times, inputs, method=method)
         gains = gains_all[log.gain_index]  # index -1 picks the fixed 1
-        channels = offsets + gains * response[:, :count]
+        channels = offsets[None, :] + gains[None, :] * response[:, :count]
         predictions.append(jnp.concatenate([channels, response[:, count:]], axis=1))
     return tuple(predictions)
 
@@ -114,7 +114,7 @@ def calc_predictions(x, problem: FitProblem, layout: ParameterLayout, method: st
 def calc_residuals(x, problem: FitProblem, layout: ParameterLayout):
     """Weighted residuals (observed − model) / noise of all logs, one flat vector."""
     predictions = calc_predictions(x, problem, layout)
-    return jnp.concatenate([((log.observed - prediction) * log.weights).reshape(-1) for log, prediction in zip(problem.logs, predictions)])
+    return jnp.concatenate([((log.observed - prediction) * log.weights[None, :]).reshape(-1) for log, prediction in zip(problem.logs, predictions)])
 
 
 def pack(layout: ParameterLayout, *, long_term, moduli, taus, gains, offsets, amplitudes=None, exponents=None) -> np.ndarray:

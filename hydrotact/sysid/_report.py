@@ -13,13 +13,11 @@
 import json
 from pathlib import Path
 
-import jax.numpy as jnp
 import numpy as np
 
 from .. import __version__
 from .._files import write_text_atomic
 from ..data import make_material_document, write_material
-from ..visco import Prony
 from ._fit import FitResult
 
 _MAX_PLOTTED_CHANNELS = 8
@@ -133,13 +131,14 @@ def calc_relaxation_band(result: FitResult, times, draws: int = 400, seed: int =
     head = int(result.layout.has_long_term)
     count = result.layout.num_terms
 
-    def modulus(x):
-        long_term = np.exp(x[0]) if head else 1.0
-        prony = Prony(jnp.asarray(long_term), jnp.exp(jnp.asarray(x[head : head + count])), jnp.exp(jnp.asarray(x[head + count :])))
-        return np.asarray(prony.calc_relaxation_modulus(times))
+    def moduli(x):  # E(t) for rows of log parameters x (NumPy, all draws at once)
+        x = np.atleast_2d(x)
+        long_term = np.exp(x[:, 0]) if head else np.ones(len(x))
+        terms = np.exp(x[:, head : head + count])[:, None, :] * np.exp(-times[None, :, None] / np.exp(x[:, head + count :])[:, None, :])
+        return long_term[:, None] + terms.sum(axis=-1)
 
-    curves = np.array([modulus(x) for x in samples])
-    return modulus(mean), np.percentile(curves, 2.5, axis=0), np.percentile(curves, 97.5, axis=0)
+    curves = moduli(samples)
+    return moduli(mean)[0], np.percentile(curves, 2.5, axis=0), np.percentile(curves, 97.5, axis=0)
 
 
 def plot_fit(result: FitResult, out_dir) -> dict:

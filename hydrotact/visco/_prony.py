@@ -55,8 +55,9 @@ class Prony(eqx.Module):
     def calc_relaxation_modulus(self, times):
         """E(t) at `times` (any shape), Pa."""
         times = jnp.asarray(times)
-        decay = jnp.exp(-times[..., None] / self.taus)
-        return self.long_term_modulus + jnp.sum(self.moduli * decay, axis=-1)
+        shape = (1,) * times.ndim + (-1,)
+        decay = jnp.exp(-times[..., None] / self.taus.reshape(shape))
+        return self.long_term_modulus + jnp.sum(self.moduli.reshape(shape) * decay, axis=-1)
 
 
 def make_prony(long_term_modulus, moduli=(), taus=(), source: str | None = None) -> Prony:
@@ -108,7 +109,7 @@ def _linear_recurrence(decay, drive, start, method: str):
 def _kernel_terms(taus, times, values):
     """Per step and term: x = Δ/τ, the decay a = e^{−x} and the unit-modulus gain
     c = (1 − e^{−x})/x that multiplies the input increment (shapes (T−1, K, 1))."""
-    ratio = (jnp.diff(times)[:, None] / taus)[:, :, None]
+    ratio = (jnp.diff(times)[:, None] / taus[None, :])[:, :, None]
     return ratio, jnp.exp(-ratio), -jnp.expm1(-ratio) / ratio
 
 
@@ -171,8 +172,8 @@ def calc_hereditary_integral(prony: Prony, times, unit_values, method: str = "sc
     unit_values = jnp.asarray(unit_values)
     trailing = unit_values.shape[1:]
     values = unit_values.reshape(unit_values.shape[0], -1)  # (T, C)
-    if prony.taus.shape[0] == 0:
-        response = prony.long_term_modulus * values
+    if prony.taus.shape[0] == 0 or values.shape[0] == 1:
+        response = prony.instantaneous_modulus * values if values.shape[0] == 1 else prony.long_term_modulus * values
     else:
         responses = _kernel_responses(prony.taus, times, values, method)  # (T, K, C)
         response = prony.long_term_modulus * values + jnp.einsum("k,tkc->tc", prony.moduli, responses)

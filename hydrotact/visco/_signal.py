@@ -45,7 +45,10 @@ def make_barometer_signal(part, num_channels: int, *, gains=None, offsets=None, 
     offsets and drifts to 0 (host; checks every number)."""
 
     def per_channel(values, default, name):
-        values = np.broadcast_to(np.asarray(default if values is None else values, dtype=np.float64), (num_channels,))
+        values = np.asarray(default if values is None else values, dtype=np.float64)
+        if values.ndim > 1 or (values.ndim == 1 and values.shape[0] != num_channels):
+            raise HydrotactError(f"barometer signal: {name}: {values.size} values for {num_channels} channels")
+        values = np.broadcast_to(values, (num_channels,))
         if not np.all(np.isfinite(values)):
             raise HydrotactError(f"barometer signal: {name} must be finite numbers")
         return jnp.asarray(values)
@@ -87,7 +90,7 @@ def calc_barometer_readings(signal: BarometerSignal, sample_times, pressures, ke
     `sample_times` (S,) (pure). Without `key`, no noise; `quantise` rounds to the
     LSB (its gradient is that of the unrounded reading: a straight-through rule)."""
     elapsed = sample_times - sample_times[0]
-    reading = signal.ambient + signal.offsets + signal.gains * pressures + signal.drift_rates * elapsed[:, None]
+    reading = signal.ambient + signal.offsets[None, :] + signal.gains[None, :] * pressures + signal.drift_rates[None, :] * elapsed[:, None]
     if key is not None:
         reading = reading + signal.noise_rms * jax.random.normal(key, reading.shape, dtype=reading.dtype)
     if quantise:
