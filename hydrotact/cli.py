@@ -66,6 +66,13 @@ def _parser() -> argparse.ArgumentParser:
     simulate.add_argument("--trajectory", required=True, type=Path, metavar="TRAJ.csv", help="CSV with columns time (s), x, y, z (probe tip, --units) and optionally rx, ry, rz (rad)")
     simulate.add_argument("--units", default="m", choices=["m", "mm", "cm", "um"], help="length unit of the trajectory's x, y, z (default m)")
     simulate.add_argument("--modulus", type=_length, default=1e6, metavar="E", help="hydroelastic modulus in Pa (default 1e6)")
+    simulate.add_argument("--material", type=Path, metavar="MATERIAL.json", help="a viscoelastic material (Prony series; e.g. from hydrotact fit); overrides --modulus")
+    simulate.add_argument("--barometer", action="store_true", help="write absolute barometer readings (the sensor's part: ambient, LSB, noise, rate) instead of elastomer pressures")
+    simulate.add_argument("--seed", type=int, default=0, help="seed of the barometer noise and channel spreads (default 0)")
+    simulate.add_argument("--noise", type=_length, metavar="PA", help="barometer RMS noise in Pa (default: the part's)")
+    simulate.add_argument("--gain-spread", type=_length, default=0.0, metavar="S", help="std. dev. of the channel gains around 1 (default 0)")
+    simulate.add_argument("--offset-spread", type=_length, default=0.0, metavar="PA", help="std. dev. of the channel offsets in Pa (default 0)")
+    simulate.add_argument("--force-noise", type=_length, default=0.0, metavar="N", help="load-cell RMS noise added to fx, fy, fz in N (default 0)")
     simulate.add_argument("--field", default="laplace", choices=["laplace", "distance"], help="the sensor's strain field")
     simulate.add_argument("--rays", type=int, default=64, metavar="N", help="rays per taxel receptive field (default 64)")
     simulate.add_argument("-o", "--output", required=True, type=Path, metavar="LOG.parquet", help="the log to write (Parquet)")
@@ -85,7 +92,7 @@ def _parser() -> argparse.ArgumentParser:
     fit.add_argument("-o", "--output", required=True, type=Path, metavar="FITDIR", help="folder for material.json, report.json and plots")
     fit.add_argument("--json", action="store_true", help="print the report as JSON")
 
-    demo = commands.add_parser("demo", help="the built-in demonstration: writes results and pictures to out/")
+    demo = commands.add_parser("demo", help="the main job on built-in data: simulate a pad5x5 log with a known viscoelastic material, fit it back; results and pictures in out/")
     demo.add_argument("-o", "--output", type=Path, default=Path("out"), metavar="DIR")
     return parser
 
@@ -109,18 +116,16 @@ def _run(args) -> None:
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from ._jobs import load_tet_mesh, run_demo, solve_field
+    from ._jobs import load_tet_mesh, solve_field
 
     if args.command == "demo":
+        from ._demo_job import run_demo
+
         summary = run_demo(args.output)
         print(f"hydrotact demo: results in {args.output}/")
-        print(f"  summary: {args.output / 'summary.json'}")
-        for name, sensor in summary["sensors"].items():
-            field = sensor["laplace_field"]
-            print(f"  {name}: {field['num_tets']} tets, field solved in {field['solve_seconds']:.3f} s "
-                  f"({field['cg_iterations']} CG iterations, residual {field['residual_norm']:.1e})")
-            for path in sensor["files"].values():
-                print(f"    {path}")
+        for path in summary["files"].values():
+            print(f"  {path}")
+        print(f"  {args.output / 'summary.json'}")
         return
 
     if args.command == "fit":
@@ -148,7 +153,8 @@ def _run(args) -> None:
         from ._simulate_job import run_simulate
 
         report = run_simulate(
-            args.sensor, args.probe, args.trajectory, args.output, modulus=args.modulus, field=args.field,
+            args.sensor, args.probe, args.trajectory, args.output, modulus=args.modulus, material=args.material, barometer=args.barometer,
+            seed=args.seed, noise_rms=args.noise, gain_spread=args.gain_spread, offset_spread=args.offset_spread, force_noise=args.force_noise, field=args.field,
             num_rays=args.rays, units=args.units, png=args.png, progress=not args.json,
         )
         _print_report(f"simulated log of {report['sensor']}", report, args.json)

@@ -483,13 +483,7 @@ def test_fit_unknown_solver(tmp_path, capsys, lumped_parquet):
     assert not output.exists()
 
 
-@pytest.mark.parametrize(
-    "rays",
-    [
-        "-3",
-        pytest.param("0", marks=pytest.mark.xfail(strict=True, reason="bug: fit takes `num_rays or metadata['num_rays']`, so --rays 0 silently becomes the log's 16 and the fit runs; simulate --rays 0 is refused")),
-    ],
-)
+@pytest.mark.parametrize("rays", ["-3", "0"])
 def test_fit_refuses_a_bad_ray_count(simulated, tmp_path, capsys, rays):
     _, log_path = simulated
     output = tmp_path / "fit"

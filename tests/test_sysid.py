@@ -6,17 +6,12 @@ integral of the true Prony series, and the BMP388 signal model with channel gain
 offsets, 2 Pa white noise (a barometer cast in silicone) and the part's 0.016 Pa
 quantisation; the reference force has 5 mN noise. Fits are shared through
 module-scoped fixtures: each new problem shape compiles the solve once.
-
-Known bugs worked around here: hydrotact.visco (and so the fit model) broadcasts by
-implicit rank promotion, which tests/conftest.py makes an error (the strict xfails in
-tests/test_visco.py), so this module allows it; FitProblem's static `infos` carry each
-log's noise estimate, so a new log of the same shapes recompiles the solve (the strict
-xfail test_refit_of_same_shape_reuses_compiled_solve); importing jaxopt warns.
+A new log of the same shapes reuses the compiled solve (checked by counting XLA
+compilations).
 """
 
 import contextlib
 import json
-import warnings
 
 import equinox as eqx
 import jax
@@ -24,14 +19,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-with warnings.catch_warnings():
-    # jaxopt (the L-BFGS-B solver) warns on import that it is unmaintained.
-    warnings.filterwarnings("ignore", "JAXopt is no longer maintained", DeprecationWarning)
-    import jaxopt  # noqa: F401
-
 from hydrotact import HydrotactError
 from hydrotact.data import BarometerLog, read_material
-from hydrotact.sysid import FitProblem, fit_auto, fit_parameters, fit_problem, fit_relaxation_curve, make_fit_problem, make_initial_guess
+from hydrotact.sysid import fit_auto, fit_parameters, fit_problem, fit_relaxation_curve, make_fit_problem, make_initial_guess
 from hydrotact.visco import make_prony
 from sysid_synthetic import FullLogMaker, make_lumped_log
 
@@ -52,14 +42,6 @@ def _material_estimates(result):
 
 def _material_truth(truth):
     return [truth["long_term_modulus"], *truth["moduli"], *truth["taus"]]
-
-
-@pytest.fixture(autouse=True, scope="module")
-def _allow_rank_promotion():
-    """Work-around for the rank-promotion bug of hydrotact.visco (see
-    tests/test_visco.py); remove when its xfails start passing."""
-    with jax.numpy_rank_promotion("allow"):
-        yield
 
 
 @contextlib.contextmanager
@@ -159,15 +141,13 @@ def test_one_sigma_coverage(maker_2, problem_2):
     number could hide: 50 draws of a 68 % event fall outside 55-80 % too often to
     test parameters one by one).
 
-    Each seed's problem reuses the first one's static `infos`, so the 49 refits
-    compile nothing (checked): see test_refit_of_same_shape_reuses_compiled_solve.
+    The 49 refits after the first compile nothing (checked).
     """
     truth = np.array(_material_truth(TRUTH_2))
     inside = []
     with count_compilations() as compilations:
         for seed in range(COVERAGE_SEEDS):
             problem = make_fit_problem([maker_2.make(seed)], unit_responses=maker_2.unit_responses)
-            problem = FitProblem(logs=problem.logs, mode=problem.mode, gain_names=problem.gain_names, infos=problem_2.infos)
             result = fit_problem(problem, 2, "lm")
             assert result.converged, seed
             estimates = _material_estimates(result)
@@ -184,7 +164,6 @@ def test_one_sigma_coverage(maker_2, problem_2):
     assert len(compilations) == first, f"{len(compilations) - first} compilations after the first seed"
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason="FitProblem.infos is static and holds each log's noise estimate (and source), so every new log recompiles the solve")
 def test_refit_of_same_shape_reuses_compiled_solve(maker_2, problem_2):
     """A new log of the same shapes, through the public calls, compiles nothing."""
     fit_problem(problem_2, 2, "lm")

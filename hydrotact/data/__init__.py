@@ -26,6 +26,7 @@ from ._tare import (
 from ._material import (
     check_material as check_material,
     make_material_document as make_material_document,
+    material_prony as material_prony,
     parameter_names as parameter_names,
     read_material as read_material,
     write_material as write_material,

@@ -178,3 +178,14 @@ def read_material(path) -> dict:
     document = read_json(path)
     check_material(document, str(path))
     return document
+
+
+def material_prony(document: dict, source: str = "material document"):
+    """The Prony series (hydrotact.visco.Prony) of a checked material document; a
+    relative-scale (lumped-fit) material cannot drive a simulation."""
+    from ..visco import make_prony
+
+    if document.get("modulus_scale") == "relative":
+        raise HydrotactError(f"{source}: modulus_scale: a relative material (from a lumped fit) has no moduli in Pa; it cannot drive a simulation")
+    terms = document["prony_terms"]
+    return make_prony(document["long_term_modulus_Pa"]["value"], [t["modulus_Pa"]["value"] for t in terms], [t["tau_s"]["value"] for t in terms], source=source)

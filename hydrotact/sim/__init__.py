@@ -16,6 +16,7 @@ from ._simulate import (
     calc_samples as calc_samples,
     calc_simulation as calc_simulation,
     calc_unit_response as calc_unit_response,
+    calc_viscoelastic_samples as calc_viscoelastic_samples,
     compute_unit_responses as compute_unit_responses,
     grown_sim_capacity as grown_sim_capacity,
     scale_unit_responses as scale_unit_responses,

@@ -129,7 +129,22 @@ def calc_samples(model: SensorModel, material: Material, times, unit: UnitRespon
     """Scale unit responses (batched over samples) by the material and derive the
     labels (pure)."""
     modulus = material.modulus
-    force = modulus * unit.force_S
+    return _labelled_samples(model, times, unit, modulus, modulus * unit.taxel_pressures, modulus * unit.force_S, modulus * unit.torque_S)
+
+
+def calc_viscoelastic_samples(model: SensorModel, prony, times, unit: UnitResponse) -> Samples:
+    """Samples of a viscoelastic material (pure): taxel pressures, force and torque are
+    the hereditary integrals of their unit responses with the Prony modulus E(t)
+    (correspondence principle); `modulus` is reported as E(0)."""
+    from ..visco import calc_hereditary_integral
+
+    stacked = jnp.concatenate([unit.taxel_pressures, unit.force_S, unit.torque_S], axis=1)
+    relaxed = calc_hereditary_integral(prony, times, stacked)
+    count = unit.taxel_pressures.shape[1]
+    return _labelled_samples(model, times, unit, prony.instantaneous_modulus, relaxed[:, :count], relaxed[:, count : count + 3], relaxed[:, count + 3 :])
+
+
+def _labelled_samples(model, times, unit, modulus, taxel_pressures, force, torque) -> Samples:
     magnitude = safe_norm(force)
     in_contact = magnitude > CONTACT_THRESHOLD_N
     theta, phi = calc_contact_angles(unit.contact_point_S, model.contact_center_S[None])
@@ -138,9 +153,9 @@ def calc_samples(model: SensorModel, material: Material, times, unit: UnitRespon
         times=times,
         unit=unit,
         modulus=modulus,
-        taxel_pressures=modulus * unit.taxel_pressures,
+        taxel_pressures=taxel_pressures,
         force_S=force,
-        torque_S=modulus * unit.torque_S,
+        torque_S=torque,
         normal_force=jnp.sum(force * unit.normal_S, axis=-1),
         theta=jnp.where(defined, theta, jnp.nan),
         phi=jnp.where(defined, phi, jnp.nan),
@@ -212,7 +227,12 @@ def simulate(model: SensorModel, material: Material, probe, trajectory: Trajecto
     return scale_unit_responses(model, material, trajectory.times, unit)
 
 
-def scale_unit_responses(model: SensorModel, material: Material, times, unit: UnitResponse) -> Samples:
-    """:func:`calc_samples` on host (NumPy) unit responses; **Returns:** NumPy-backed Samples."""
+def scale_unit_responses(model: SensorModel, material, times, unit: UnitResponse) -> Samples:
+    """:func:`calc_samples` (a Material) or :func:`calc_viscoelastic_samples` (a
+    visco.Prony) on host (NumPy) unit responses; **Returns:** NumPy-backed Samples."""
     unit = jax.tree_util.tree_map(jnp.asarray, unit)
-    return jax.tree_util.tree_map(np.asarray, calc_samples(model, material, jnp.asarray(times), unit))
+    if isinstance(material, Material):
+        samples = calc_samples(model, material, jnp.asarray(times), unit)
+    else:
+        samples = calc_viscoelastic_samples(model, material, jnp.asarray(times), unit)
+    return jax.tree_util.tree_map(np.asarray, samples)

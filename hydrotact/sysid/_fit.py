@@ -124,7 +124,7 @@ class FitResult:
         return result
 
     def predictions(self) -> list[np.ndarray]:
-        return [np.asarray(p) for p in _predict(jnp.asarray(self.x), self.problem, self.layout)]
+        return [np.asarray(p) for p in _predict(jnp.asarray(self.x), self.problem.without_infos(), self.layout)]
 
     def residual_diagnostics(self) -> list[dict]:
         """Per log and column: RMS residual (data units), RMS in noise units, lag-1
@@ -203,7 +203,7 @@ def make_initial_guess(problem: FitProblem, num_terms: int) -> tuple[ParameterLa
         term_moduli, long_term = term_moduli / long_term, 1.0
     x0 = pack(layout, long_term=long_term, moduli=term_moduli, taus=taus, gains=np.ones(layout.num_gains), offsets=offsets, **kwargs)
     # Offsets: the mean misfit of each channel at the start, in noise units.
-    predictions = _predict(jnp.asarray(x0), problem, layout)
+    predictions = _predict(jnp.asarray(x0), problem.without_infos(), layout)
     first = layout.num_material + layout.num_gains
     for log, prediction in zip(problem.logs, predictions):
         count = log.num_channels
@@ -239,7 +239,7 @@ def fit_problem(problem: FitProblem, num_terms: int, solver: str = "lm", *, rtol
     start = time.perf_counter()
     layout, x0 = make_initial_guess(problem, int(num_terms))
     bounds = _bounds(problem, layout, x0) if solver == "lbfgsb" else None
-    x, steps, converged, chi_square, normal = _run(problem, layout, jnp.asarray(x0), solver, bounds, rtol, atol, max_steps)
+    x, steps, converged, chi_square, normal = _run(problem.without_infos(), layout, jnp.asarray(x0), solver, bounds, rtol, atol, max_steps)
     num_residuals = problem.num_samples
     dof = max(1, num_residuals - layout.size)
     normal = np.asarray(normal)

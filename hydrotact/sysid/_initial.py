@@ -18,6 +18,7 @@ from ..visco import Prony, calc_hereditary_integral
 
 _MAX_ROWS = 20000  # the linear fit only needs the shape of the data: thin long logs
 _MODULUS_FLOOR = 1e-6  # of the total modulus: a term NNLS left at 0 starts here
+_NEGLIGIBLE = 1e-2  # of the terms' total modulus: grid terms below this are not merged
 
 
 def make_tau_grid(times_list, per_decade: int = 4) -> np.ndarray:
@@ -44,7 +45,9 @@ def _basis(times, inputs, taus):
 def merge_terms(taus: np.ndarray, moduli: np.ndarray, num_terms: int, floor: float) -> tuple[np.ndarray, np.ndarray]:
     """Merge a grid's non-zero terms into `num_terms` (τ, E) pairs, splitting at the
     widest gaps in log τ; pad with small terms spread over the grid if too few."""
-    active = moduli > 0.0
+    # Grid terms far below the others (a sliver of modulus at the log's length, say)
+    # would take a term of their own and force two real time scales into one.
+    active = moduli > _NEGLIGIBLE * moduli.sum()
     taus_on, moduli_on = taus[active], moduli[active]
     if num_terms == 0:
         return np.zeros(0), np.zeros(0)

@@ -96,6 +96,12 @@ class FitProblem(eqx.Module):
     def num_samples(self) -> int:
         return sum(int(log.observed.size) for log in self.logs)
 
+    def without_infos(self) -> "FitProblem":
+        """The same problem without the per-log descriptions: what jitted calls get,
+        so that logs of the same shapes share one compilation (the descriptions are
+        static and differ from log to log)."""
+        return FitProblem(logs=self.logs, mode=self.mode, gain_names=self.gain_names, infos=())
+
 
 def estimate_noise(values: np.ndarray) -> np.ndarray:
     """Per-column white-noise standard deviation of (T, C) samples: the median absolute
@@ -121,11 +127,35 @@ def _file_digest(path) -> str | None:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+def _log_pose_rows(log) -> np.ndarray:
+    """(T, 6) the logged probe pose per sample: position (m), rotation vector (rad)."""
+    zeros = np.zeros(log.num_samples)
+    return np.column_stack([np.asarray(log.columns[name], dtype=np.float64) for name in POSE_COLUMNS] + [np.asarray(log.columns.get(name, zeros), dtype=np.float64) for name in ROTATION_COLUMNS])
+
+
+def _unit_response_cache(spec, probe_spec: str, field: str, num_rays: int, unique_rows: np.ndarray) -> Path:
+    from .._files import cache_dir, digest
+
+    key = digest("unit-responses-1", spec.name, repr(spec.to_json()), probe_spec, field, int(num_rays), np.ascontiguousarray(unique_rows).tobytes())
+    return cache_dir() / "unit_responses" / f"{key}.npz"
+
+
+def store_unit_responses(spec, probe_spec: str, field: str, num_rays: int, pose_rows, taxels, forces) -> None:
+    """Cache the unit responses of a simulated log (taxels (T, C), forces (T, 3), per
+    pascal of E, at `pose_rows` (T, 6)), so that a full-mode fit of that log does not
+    simulate them again."""
+    from .._files import atomic_path
+
+    unique, first = np.unique(np.asarray(pose_rows, dtype=np.float64), axis=0, return_index=True)
+    with atomic_path(_unit_response_cache(spec, probe_spec, field, num_rays, unique), suffix=".npz") as tmp:
+        np.savez(tmp, taxels=np.asarray(taxels)[first], forces=np.asarray(forces)[first])
+
+
 def _unique_pose_responses(log, source: str, field: str, num_rays: int, progress: bool):
     """Unit responses of the log's taxels and contact force at its probe poses: each
     distinct pose is simulated once (holds repeat poses), results cached on disk."""
     from .._contact_job import parse_probe
-    from .._files import atomic_path, cache_dir, digest
+    from .._files import atomic_path
     from ..contact import make_pose
     from ..sensors import load_sensor
     from ..sim import compute_unit_responses, make_sensor_model
@@ -139,11 +169,9 @@ def _unique_pose_responses(log, source: str, field: str, num_rays: int, progress
     spec = load_sensor(metadata["sensor"], source=f"{source}: sensor")
     if spec.num_taxels != len(metadata["channels"]):
         raise HydrotactError(f"{source}: channels: {len(metadata['channels'])} channels, but sensor {spec.name} has {spec.num_taxels} taxels")
-    poses = np.column_stack([np.asarray(log.columns[name], dtype=np.float64) for name in POSE_COLUMNS] + [np.asarray(log.columns.get(name, np.zeros(log.num_samples)), dtype=np.float64) for name in ROTATION_COLUMNS])
-    unique, inverse = np.unique(poses, axis=0, return_inverse=True)
+    unique, inverse = np.unique(_log_pose_rows(log), axis=0, return_inverse=True)
     inverse = inverse.reshape(-1)
-    key = digest("unit-responses-1", spec.name, repr(spec.to_json()), metadata["probe"], field, num_rays, unique.tobytes())
-    cache = cache_dir() / "unit_responses" / f"{key}.npz"
+    cache = _unit_response_cache(spec, metadata["probe"], field, num_rays, unique)
     if cache.is_file():
         with np.load(cache) as saved:
             taxels, forces = saved["taxels"], saved["forces"]
@@ -184,6 +212,8 @@ def make_fit_problem(logs, *, mode: str = "full", indentation: str = "indentatio
         raise HydrotactError(f"unknown fit mode {mode!r}; use one of {', '.join(MODES)}")
     if not logs:
         raise HydrotactError("no logs to fit")
+    if num_rays is not None and (int(num_rays) != num_rays or num_rays < 1):
+        raise HydrotactError(f"--rays: rays per taxel must be at least 1, got {num_rays}")
     sources = list(sources) if sources is not None else [f"log {k + 1}" for k in range(len(logs))]
     prepared, infos, gain_names = [], [], []
     for k, (log, source) in enumerate(zip(logs, sources)):
@@ -200,7 +230,9 @@ def make_fit_problem(logs, *, mode: str = "full", indentation: str = "indentatio
                 if taxels.shape != observed.shape or forces.shape != (len(times), 3):
                     raise HydrotactError(f"{source}: unit responses of shapes {taxels.shape} and {forces.shape} do not match {observed.shape} channels and (T, 3) forces")
             else:
-                taxels, forces = _unique_pose_responses(log, source, field or metadata.get("field", "laplace"), num_rays or metadata.get("num_rays", 64), progress)
+                log_field = metadata.get("field", "laplace") if field is None else field
+                log_rays = metadata.get("num_rays", 64) if num_rays is None else num_rays
+                taxels, forces = _unique_pose_responses(log, source, log_field, log_rays, progress)
             inputs = taxels
             if use_forces:
                 force_columns = tuple(name for k, name in enumerate(FORCE_COLUMNS) if name in log.columns and np.max(np.abs(forces[:, k])) > 0.0)

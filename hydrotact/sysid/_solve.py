@@ -6,9 +6,14 @@ optimistix solutions are differentiable in the data through the implicit functio
 theorem (`optimistix.ImplicitAdjoint`).
 """
 
+import warnings
+
 import jax
 import jax.numpy as jnp
-import jaxopt
+
+with warnings.catch_warnings():  # jaxopt (in maintenance) warns on import that it is deprecated
+    warnings.simplefilter("ignore", DeprecationWarning)
+    import jaxopt
 import lineax as lx
 import optimistix as optx
 

@@ -1,0 +1,105 @@
+"""The demo: hydrotact's main job, end to end, on built-in data.
+
+1. A probe trajectory over the pad5x5 sensor: a Ø2 mm flat cylinder presses six
+   taxels in turn (0.4 s ramps, holds of 3 to 25 s, rests between), as a stage would.
+2. A known viscoelastic material (E∞ and three Prony terms with well-separated τ),
+   written as `truth_material.json`.
+3. `hydrotact simulate --material truth_material.json --barometer`: absolute BMP388
+   readings (ambient, per-channel gain and offset, noise, 0.016 Pa LSB, 100 Hz) and
+   load-cell forces with noise -> `demo_log.parquet` and its plot.
+4. `hydrotact fit demo_log.parquet`: the material, gains and offsets fitted back ->
+   `fit/` (material.json, report.json, traces, residuals, relaxation plots).
+5. Truth vs fit ± standard errors, printed and saved in `summary.json`.
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ._files import write_text_atomic
+
+TOP = 4e-3  # pad5x5's skin height, m
+PRESSES = (  # (x, y) m, depth m, hold s, rest after s
+    ((0.0, 0.0), 0.45e-3, 25.0, 12.0),
+    ((2.2e-3, 0.0), 0.35e-3, 4.0, 4.0),
+    ((-2.2e-3, 2.2e-3), 0.5e-3, 12.0, 20.0),
+    ((0.0, -2.2e-3), 0.3e-3, 3.0, 3.0),
+    ((2.2e-3, 2.2e-3), 0.4e-3, 8.0, 10.0),
+    ((-2.2e-3, -2.2e-3), 0.45e-3, 18.0, 8.0),
+)
+RAMP = 0.4
+MOVE = 0.1  # s, lateral moves between presses
+TRUTH = {"long_term_modulus": 6.0e5, "moduli": [2.5e5, 1.5e5, 1.0e5], "taus": [0.3, 3.0, 30.0]}
+
+
+def make_demo_trajectory() -> np.ndarray:
+    """Waypoints (time s, x, y, z m) of the demo's presses; the stage moves linearly
+    between them (z is the probe tip, 0.3 mm above the skin between presses)."""
+    rows, time = [], 0.0
+    clear = TOP + 0.3e-3
+    x0, y0 = PRESSES[0][0]
+    rows.append((time, x0, y0, clear))
+    time += 2.0
+    rows.append((time, x0, y0, clear))
+    rest_before = 0.0
+    for (x, y), depth, hold, rest in PRESSES:
+        if (x, y) != tuple(rows[-1][1:3]):  # move over the next taxel, then wait there
+            time += MOVE
+            rows.append((time, x, y, clear))
+            time += rest_before
+            rows.append((time, x, y, clear))
+        rest_before = rest
+        time += RAMP * (1 + 0.3e-3 / depth)
+        rows.append((time, x, y, TOP - depth))
+        time += hold
+        rows.append((time, x, y, TOP - depth))
+        time += RAMP * (1 + 0.3e-3 / depth)
+        rows.append((time, x, y, clear))
+    time += rest_before
+    rows.append((time, *rows[-1][1:]))
+    return np.array(rows)
+
+
+def run_demo(out_dir, progress: bool = True) -> dict:
+    """Simulate the demo log, fit it, write everything into out_dir; returns the
+    summary (also out_dir/summary.json)."""
+    from ._fit_job import print_fit_table, run_fit
+    from ._simulate_job import run_simulate
+    from .data import make_material_document, write_material
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    trajectory = out_dir / "demo_trajectory.csv"
+    np.savetxt(trajectory, make_demo_trajectory(), delimiter=",", header="time,x,y,z", comments="", fmt="%.9g")
+    truth_path = out_dir / "truth_material.json"
+    truth = make_material_document(
+        TRUTH["long_term_modulus"], TRUTH["moduli"], TRUTH["taus"], name="demo truth",
+        description="The material the demo log is simulated with.", provenance={"method": "simulation"},
+    )
+    write_material(truth_path, truth)
+    log_path = out_dir / "demo_log.parquet"
+    simulated = run_simulate(
+        "pad5x5", "cylinder:d=2mm", trajectory, log_path, material=truth_path, barometer=True, seed=1, noise_rms=0.5,
+        gain_spread=0.05, offset_spread=30.0, force_noise=0.005, num_rays=32, png=out_dir / "demo_log.png", progress=progress,
+    )
+    report = run_fit([log_path], out_dir / "fit", terms="auto", progress=progress)
+    log_metadata = json.loads(json.dumps(_log_metadata(log_path)))
+    gains = {f"pad5x5/{name}": g for name, g in zip(log_metadata["channels"], log_metadata["barometer"]["gains"])}
+    truth_numbers = {**TRUTH, "instantaneous_modulus": TRUTH["long_term_modulus"] + sum(TRUTH["moduli"]), "gains": gains}
+    print_fit_table(report, truth_numbers)
+    summary = {
+        "truth": truth_numbers,
+        "fit": {key: report[key] for key in ("num_terms", "long_term_modulus_Pa", "prony_terms", "instantaneous_modulus_Pa", "reduced_chi_square", "converged", "seconds")},
+        "criterion": report.get("criterion"),
+        "simulation": simulated,
+        "files": {"trajectory": str(trajectory), "truth_material": str(truth_path), "log": str(log_path), "log_png": str(out_dir / "demo_log.png"), **report["files"]},
+    }
+    write_text_atomic(out_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
+    return summary
+
+
+def _log_metadata(path) -> dict:
+    from .data import read_log
+
+    return read_log(path).metadata
