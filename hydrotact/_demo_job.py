@@ -33,17 +33,17 @@ MOVE = 0.1  # s, lateral moves between presses
 TRUTH = {"long_term_modulus": 6.0e5, "moduli": [2.5e5, 1.5e5, 1.0e5], "taus": [0.3, 3.0, 30.0]}
 
 
-def make_demo_trajectory() -> np.ndarray:
+def make_demo_trajectory(presses=PRESSES) -> np.ndarray:
     """Waypoints (time s, x, y, z m) of the demo's presses; the stage moves linearly
     between them (z is the probe tip, 0.3 mm above the skin between presses)."""
     rows, time = [], 0.0
     clear = TOP + 0.3e-3
-    x0, y0 = PRESSES[0][0]
+    x0, y0 = presses[0][0]
     rows.append((time, x0, y0, clear))
     time += 2.0
     rows.append((time, x0, y0, clear))
     rest_before = 0.0
-    for (x, y), depth, hold, rest in PRESSES:
+    for (x, y), depth, hold, rest in presses:
         if (x, y) != tuple(rows[-1][1:3]):  # move over the next taxel, then wait there
             time += MOVE
             rows.append((time, x, y, clear))
@@ -61,9 +61,13 @@ def make_demo_trajectory() -> np.ndarray:
     return np.array(rows)
 
 
-def run_demo(out_dir, progress: bool = True) -> dict:
+SMOKE_PRESSES = (((0.0, 0.0), 0.45e-3, 12.0, 6.0), ((2.2e-3, 0.0), 0.35e-3, 3.0, 3.0))
+
+
+def run_demo(out_dir, progress: bool = True, smoke: bool = False) -> dict:
     """Simulate the demo log, fit it, write everything into out_dir; returns the
-    summary (also out_dir/summary.json)."""
+    summary (also out_dir/summary.json). `smoke`: two presses, two Prony terms
+    (0.3 s, 3 s), 16 rays: the same job at test-suite size."""
     from ._fit_job import print_fit_table, run_fit
     from ._simulate_job import run_simulate
     from .data import make_material_document, write_material
@@ -71,22 +75,25 @@ def run_demo(out_dir, progress: bool = True) -> dict:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     trajectory = out_dir / "demo_trajectory.csv"
-    np.savetxt(trajectory, make_demo_trajectory(), delimiter=",", header="time,x,y,z", comments="", fmt="%.9g")
+    np.savetxt(trajectory, make_demo_trajectory(SMOKE_PRESSES if smoke else PRESSES), delimiter=",", header="time,x,y,z", comments="", fmt="%.9g")
+    truth_numbers = dict(TRUTH)
+    if smoke:
+        truth_numbers.update(moduli=TRUTH["moduli"][:2], taus=TRUTH["taus"][:2])
     truth_path = out_dir / "truth_material.json"
     truth = make_material_document(
-        TRUTH["long_term_modulus"], TRUTH["moduli"], TRUTH["taus"], name="demo truth",
+        truth_numbers["long_term_modulus"], truth_numbers["moduli"], truth_numbers["taus"], name="demo truth",
         description="The material the demo log is simulated with.", provenance={"method": "simulation"},
     )
     write_material(truth_path, truth)
     log_path = out_dir / "demo_log.parquet"
     simulated = run_simulate(
         "pad5x5", "cylinder:d=2mm", trajectory, log_path, material=truth_path, barometer=True, seed=1, noise_rms=0.5,
-        gain_spread=0.05, offset_spread=30.0, force_noise=0.005, num_rays=32, png=out_dir / "demo_log.png", progress=progress,
+        gain_spread=0.05, offset_spread=30.0, force_noise=0.005, num_rays=16 if smoke else 32, png=out_dir / "demo_log.png", progress=progress,
     )
-    report = run_fit([log_path], out_dir / "fit", terms="auto", progress=progress)
+    report = run_fit([log_path], out_dir / "fit", terms=2 if smoke else "auto", progress=progress)
     log_metadata = json.loads(json.dumps(_log_metadata(log_path)))
     gains = {f"pad5x5/{name}": g for name, g in zip(log_metadata["channels"], log_metadata["barometer"]["gains"])}
-    truth_numbers = {**TRUTH, "instantaneous_modulus": TRUTH["long_term_modulus"] + sum(TRUTH["moduli"]), "gains": gains}
+    truth_numbers = {**truth_numbers, "instantaneous_modulus": truth_numbers["long_term_modulus"] + sum(truth_numbers["moduli"]), "gains": gains}
     print_fit_table(report, truth_numbers)
     summary = {
         "truth": truth_numbers,

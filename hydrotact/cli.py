@@ -94,6 +94,7 @@ def _parser() -> argparse.ArgumentParser:
 
     demo = commands.add_parser("demo", help="the main job on built-in data: simulate a pad5x5 log with a known viscoelastic material, fit it back; results and pictures in out/")
     demo.add_argument("-o", "--output", type=Path, default=Path("out"), metavar="DIR")
+    demo.add_argument("--smoke", action="store_true", help="the same job at test-suite size (two presses, two Prony terms)")
     return parser
 
 
@@ -121,7 +122,7 @@ def _run(args) -> None:
     if args.command == "demo":
         from ._demo_job import run_demo
 
-        summary = run_demo(args.output)
+        summary = run_demo(args.output, smoke=args.smoke)
         print(f"hydrotact demo: results in {args.output}/")
         for path in summary["files"].values():
             print(f"  {path}")
