@@ -116,6 +116,25 @@ def test_recovers_known_material(result_3):
         assert abs(estimate.value / value - 1.0) < 0.05, (estimate, value)
 
 
+def test_logs_fit_jointly(maker_2, problem_2):
+    """Two logs of one sensor (different trajectories, lengths and offsets, the same
+    channel gains) fit jointly: one material, gains shared, offsets per log; the
+    joint fit recovers the truth and is more certain than the first log alone."""
+    other = FullLogMaker(_prony(TRUTH_2), duration=60.0, rate_hz=50.0, num_channels=4, trajectory_seed=11)
+    other.gains = maker_2.gains  # the same barometers; offsets (ambient) differ per log
+    logs = [maker_2.make(0), other.make(1)]
+    joint = fit_problem(make_fit_problem(logs, unit_responses=maker_2.unit_responses + other.unit_responses), 2, "lm")
+    alone = fit_problem(problem_2, 2, "lm")
+    assert joint.converged and 0.9 < joint.reduced_chi_square < 1.1
+    assert len(joint.gains) == 4 and [len(offsets) for offsets in joint.offsets()] == [4, 4]
+    for offsets, maker in zip(joint.offsets(), (maker_2, other)):
+        np.testing.assert_allclose([offsets[f"b{k}"].value - 101325.0 for k in range(4)], maker.offsets, atol=2.0)
+    np.testing.assert_allclose([g.value for g in joint.gains.values()], maker_2.gains, rtol=0.01)
+    for estimate, value, single in zip(_material_estimates(joint), _material_truth(TRUTH_2), _material_estimates(alone)):
+        assert abs(estimate.value / value - 1.0) < 0.05, (estimate, value)
+        assert estimate.std < single.std
+
+
 def test_standard_errors_are_consistent(result_3, maker_3):
     """|estimate − truth| < 5σ for the material and the channel gains; σ > 0."""
     estimates = _material_estimates(result_3) + list(result_3.gains.values())
