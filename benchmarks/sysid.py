@@ -61,7 +61,7 @@ from hydrotact.sensors import known_parts  # noqa: E402
 from hydrotact.sysid import calc_residuals, fit_problem, fit_relaxation_curve, make_fit_problem, make_initial_guess  # noqa: E402
 from hydrotact.sysid._fit import _run  # noqa: E402
 from hydrotact.sysid._model import pack  # noqa: E402
-from hydrotact.visco import calc_barometer_readings, calc_hereditary_integral, make_barometer_signal, make_prony  # noqa: E402
+from hydrotact.visco import calc_barometer_readings, calc_contact_response, make_barometer_signal, make_prony  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from pyvisco_reference import _import_pyvisco, fit_prony_pyvisco  # noqa: E402
@@ -104,7 +104,7 @@ def make_log(minutes, rate, num_channels, seed):
     unit = depth[:, None] ** 1.5 * shape  # Pa per Pa of E
     unit_force = np.zeros((len(times), 3))
     unit_force[:, 2] = 3e-6 / (0.5e-3) ** 1.5 * depth**1.5  # N per Pa of E
-    response = np.asarray(calc_hereditary_integral(truth, times, np.column_stack([unit, unit_force])))
+    response = np.asarray(calc_contact_response(truth, times, np.column_stack([unit, unit_force])))
     gains = rng.uniform(0.8, 1.2, num_channels)
     offsets = rng.normal(0.0, 50.0, num_channels)
     signal = make_barometer_signal(known_parts()["BMP388"], num_channels, gains=gains, offsets=offsets, noise_rms=BAROMETER_NOISE, rate_hz=rate)
@@ -175,6 +175,7 @@ class NumpyResidual:
         response = long_term * self.inputs
         for modulus, tau in zip(moduli, taus):
             response += modulus * self.kernel_response(tau)
+        response = np.where(self.inputs * response > 0.0, response, 0.0)  # a contact pushes, never pulls
         c = self.num_channels
         predicted = response.copy()
         predicted[:, :c] = self.offset_base + self.offset_scale * theta + gains * response[:, :c]

@@ -13,7 +13,7 @@ import numpy as np
 
 from hydrotact.data import BarometerLog
 from hydrotact.sensors import known_parts
-from hydrotact.visco import calc_barometer_readings, calc_hereditary_integral, make_barometer_signal
+from hydrotact.visco import calc_barometer_readings, calc_contact_response, make_barometer_signal
 
 PART = "BMP388"
 FORCE_NOISE = 5e-3  # N
@@ -91,7 +91,7 @@ class FullLogMaker:
         self.noise_rms = noise_rms
         self.force_noise = force_noise
         stacked = np.column_stack([self.unit, self.force_unit])
-        response = np.asarray(calc_hereditary_integral(truth, jnp.asarray(self.times), jnp.asarray(stacked)))
+        response = np.asarray(calc_contact_response(truth, jnp.asarray(self.times), jnp.asarray(stacked)))
         self.pressures = response[:, :num_channels]
         self.forces = response[:, num_channels:]
 
@@ -115,7 +115,7 @@ def make_lumped_log(relative, amplitudes, exponents, *, duration: float, rate_hz
     times, depth = make_depth_history(rng, duration, rate_hz, **history)
     normalised = depth / depth.max()
     inputs = np.asarray(amplitudes)[None, :] * normalised[:, None] ** np.asarray(exponents)[None, :]
-    pressures = np.asarray(calc_hereditary_integral(relative, jnp.asarray(times), jnp.asarray(inputs)))
+    pressures = np.asarray(calc_contact_response(relative, jnp.asarray(times), jnp.asarray(inputs)))
     count = len(amplitudes)
     readings = _readings(times, pressures, np.ones(count), rng.normal(0.0, 50.0, count), seed + 1, noise_rms)
     columns = {"time": times, **{f"b{k}": readings[:, k] for k in range(count)}, "indentation": depth}

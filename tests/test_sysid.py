@@ -97,7 +97,8 @@ LUMPED_EXPONENTS = np.array([1.5, 1.3, 1.7])
 @pytest.fixture(scope="module")
 def lumped_result():
     relative = make_prony(1.0, np.asarray(TRUTH_3["moduli"]) / TRUTH_3["long_term_modulus"], TRUTH_3["taus"])
-    log = make_lumped_log(relative, LUMPED_AMPLITUDES, LUMPED_EXPONENTS, duration=180.0, rate_hz=50.0, seed=5, holds=(2.0, 40.0))
+    # A fourth channel the probe never reaches (amplitude 0): left out of the fit.
+    log = make_lumped_log(relative, np.append(LUMPED_AMPLITUDES, 0.0), np.append(LUMPED_EXPONENTS, 1.0), duration=180.0, rate_hz=50.0, seed=5, holds=(2.0, 40.0))
     return fit_problem(make_fit_problem([log], mode="lumped"), 3, "lm")
 
 
@@ -235,9 +236,11 @@ def test_fit_auto_picks_true_number_of_terms(case, request):
 
 
 def test_lumped_recovers_power_law_and_kernel_shape(lumped_result):
-    """Per-channel amplitude and exponent (1.5, 1.3, 1.7) and Eᵢ/E∞, τᵢ within 5 %."""
+    """Per-channel amplitude and exponent (1.5, 1.3, 1.7) and Eᵢ/E∞, τᵢ within 5 %;
+    the silent fourth channel is left out."""
     result = lumped_result
     assert result.converged
+    assert result.problem.infos[0].channels == ("b0", "b1", "b2") and result.problem.infos[0].excluded == ("b3",)
     assert result.long_term_modulus.value == 1.0 and not result.layout.has_long_term
     ratios = np.asarray(TRUTH_3["moduli"]) / TRUTH_3["long_term_modulus"]
     for (modulus, tau), ratio, true_tau in zip(result.terms, ratios, TRUTH_3["taus"]):

@@ -135,11 +135,12 @@ def calc_samples(model: SensorModel, material: Material, times, unit: UnitRespon
 def calc_viscoelastic_samples(model: SensorModel, prony, times, unit: UnitResponse) -> Samples:
     """Samples of a viscoelastic material (pure): taxel pressures, force and torque are
     the hereditary integrals of their unit responses with the Prony modulus E(t)
-    (correspondence principle); `modulus` is reported as E(0)."""
-    from ..visco import calc_hereditary_integral
+    (correspondence principle), a contact pushing but never pulling
+    (visco.calc_contact_response); `modulus` is reported as E(0)."""
+    from ..visco import calc_contact_response
 
     stacked = jnp.concatenate([unit.taxel_pressures, unit.force_S, unit.torque_S], axis=1)
-    relaxed = calc_hereditary_integral(prony, times, stacked)
+    relaxed = calc_contact_response(prony, times, stacked)
     count = unit.taxel_pressures.shape[1]
     return _labelled_samples(model, times, unit, prony.instantaneous_modulus, relaxed[:, :count], relaxed[:, count : count + 3], relaxed[:, count + 3 :])
 

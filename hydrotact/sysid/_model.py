@@ -15,7 +15,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ..visco import Prony, calc_hereditary_integral
+from ..visco import Prony, calc_contact_response
 from ._problem import FitProblem
 
 
@@ -104,7 +104,7 @@ def calc_predictions(x, problem: FitProblem, layout: ParameterLayout, method: st
         else:
             inputs = log.inputs
         first += count
-        response = calc_hereditary_integral(prony, log.times, inputs, method=method)
+        response = calc_contact_response(prony, log.times, inputs, method=method)
         gains = gains_all[log.gain_index]  # index -1 picks the fixed 1
         channels = offsets[None, :] + gains[None, :] * response[:, :count]
         predictions.append(jnp.concatenate([channels, response[:, count:]], axis=1))

@@ -6,7 +6,8 @@ log has them) with the model
     reading_c(t) = offset_c + gain_c · (E ∗ u_c)(t),
 
 where (E ∗ u) is the hereditary integral of the unit-modulus response u with the Prony
-relaxation modulus (see :mod:`hydrotact.visco`). Two ways to get u:
+relaxation modulus, a contact pushing but never pulling (visco.calc_contact_response).
+Two ways to get u:
 
 - **full**: the log carries the probe pose (`probe_x`, `probe_y`, `probe_z`, optional
   `probe_rx`..`probe_rz`) and names a sensor spec and a probe; the simulator computes
@@ -15,6 +16,7 @@ relaxation modulus (see :mod:`hydrotact.visco`). Two ways to get u:
 - **lumped**: for a sensor nobody has modelled, a column gives the indentation δ; each
   channel's elastic response is a monotone power law a_c · (δ/δ_max)^b_c, fitted with
   the kernel. Then only the shape of E(t) (the ratios Eᵢ/E∞ and τᵢ) is identifiable.
+  Channels that never respond (readings spanning < 20 noise σ) are left out.
 
 Each channel is weighted by its noise, estimated from the log itself (the median
 absolute second difference, robust to contacts and ramps), so the residuals are in
@@ -40,6 +42,9 @@ MODES = ("full", "lumped")
 # Channels whose unit response stays below this fraction of the strongest channel's
 # never see the contact: their gain is not identifiable and stays 1.
 _SILENT_FRACTION = 1e-3
+# Lumped mode: channels whose readings span less than this many noise standard
+# deviations do not respond to the indentation.
+_SILENT_SPREAD = 20.0
 
 
 class LogArrays(eqx.Module):
@@ -73,6 +78,7 @@ class LogInfo:
 
     source: str
     channels: tuple[str, ...]
+    excluded: tuple[str, ...]  # channels left out of the fit (lumped: silent ones)
     force_columns: tuple[str, ...]
     sensor: str | None
     pressure: str
@@ -248,6 +254,17 @@ def make_fit_problem(logs, *, mode: str = "full", indentation: str = "indentatio
                 raise HydrotactError(f"{source}: column {indentation!r} is never positive: the probe never indents the skin, so there is nothing to fit")
             inputs = np.clip(depth / deepest, 0.0, None)[:, None]
         noise = estimate_noise(observed)
+        excluded: tuple[str, ...] = ()
+        if mode == "lumped":
+            # A channel the probe never reaches has no response to fit: its amplitude
+            # and exponent would be unidentifiable. It is left out (and reported).
+            spread = np.percentile(observed, 99.5, axis=0) - np.percentile(observed, 0.5, axis=0)
+            silent = spread < _SILENT_SPREAD * noise
+            if silent.all():
+                raise HydrotactError(f"{source}: no channel moves more than {_SILENT_SPREAD:g} noise standard deviations: nothing responds to the indentation")
+            excluded = tuple(name for name, quiet in zip(channels, silent) if quiet)
+            channels = tuple(name for name, quiet in zip(channels, silent) if not quiet)
+            observed, noise = observed[:, ~silent], noise[~silent]
         num_channels = len(channels)
         gain_index = np.full(num_channels, -1)
         if mode == "full" and force_columns:
@@ -271,5 +288,5 @@ def make_fit_problem(logs, *, mode: str = "full", indentation: str = "indentatio
             )
         )
         path = getattr(log, "path", None) or source
-        infos.append(LogInfo(source=source, channels=channels, force_columns=force_columns, sensor=log.metadata.get("sensor"), pressure=log.metadata.get("pressure", "absolute"), sha256=_file_digest(path), noise=tuple(float(v) for v in noise)))
+        infos.append(LogInfo(source=source, channels=channels, excluded=excluded, force_columns=force_columns, sensor=log.metadata.get("sensor"), pressure=log.metadata.get("pressure", "absolute"), sha256=_file_digest(path), noise=tuple(float(v) for v in noise)))
     return FitProblem(logs=tuple(prepared), mode=mode, gain_names=tuple(gain_names), infos=tuple(infos))

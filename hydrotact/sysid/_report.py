@@ -102,6 +102,9 @@ def make_report(result: FitResult) -> dict:
         "offsets_Pa": [{"source": info.source, "channels": {k: v.to_json() for k, v in offsets.items()}} for info, offsets in zip(result.problem.infos, result.offsets())],
         "residuals": result.residual_diagnostics(),
     }
+    excluded = {info.source: list(info.excluded) for info in result.problem.infos if info.excluded}
+    if excluded:
+        report["channels_left_out"] = excluded
     if result.problem.mode == "lumped":
         report["modulus_scale"] = "relative"
         k = result.layout.num_material + result.layout.num_gains + result.layout.num_channels

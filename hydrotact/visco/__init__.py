@@ -1,6 +1,11 @@
 """Viscoelasticity (Prony series, hereditary integral) and the barometer signal model."""
 
-from ._prony import Prony as Prony, calc_hereditary_integral as calc_hereditary_integral, make_prony as make_prony
+from ._prony import (
+    Prony as Prony,
+    calc_contact_response as calc_contact_response,
+    calc_hereditary_integral as calc_hereditary_integral,
+    make_prony as make_prony,
+)
 from ._signal import (
     BarometerSignal as BarometerSignal,
     calc_barometer_readings as calc_barometer_readings,

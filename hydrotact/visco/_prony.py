@@ -178,3 +178,22 @@ def calc_hereditary_integral(prony: Prony, times, unit_values, method: str = "sc
         responses = _kernel_responses(prony.taus, times, values, method)  # (T, K, C)
         response = prony.long_term_modulus * values + jnp.einsum("k,tkc->tc", prony.moduli, responses)
     return response.reshape((values.shape[0], *trailing))
+
+
+def calc_contact_response(prony: Prony, times, unit_values, method: str = "scan"):
+    """The viscoelastic response of a contact, which can push but never pull (pure).
+
+    The hereditary integral (:func:`calc_hereditary_integral`) of a contact's elastic
+    response turns negative after the probe lifts off: the relaxed skin "remembers"
+    its load and, linearly superposed, would pull on the probe while it recovers. A
+    contact cannot do that: a viscoelastic skin recovers more slowly than the probe
+    leaves, so the contact is lost no later than in the elastic solution and its
+    pressure stays ≥ 0. Hence, per component: the hereditary integral where it has
+    the sign of the elastic response, 0 where the elastic response is 0 (no contact)
+    or the signs differ. The memory (the terms' states) runs on regardless, so the
+    next contact still starts from the residual stress of the earlier ones.
+
+    **Arguments/Returns:** as :func:`calc_hereditary_integral`.
+    """
+    response = calc_hereditary_integral(prony, times, unit_values, method)
+    return jnp.where(jnp.asarray(unit_values) * response > 0.0, response, 0.0)
