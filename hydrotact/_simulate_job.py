@@ -126,6 +126,10 @@ def run_simulate(sensor: str, probe_spec: str, trajectory_path, output, *, modul
         raise HydrotactError(f"{output}: the log is written as Parquet; name it *.parquet")
     if png is not None and Path(png).suffix.lower() != ".png":
         raise HydrotactError(f"{png}: the plot is written as PNG; name it *.png")
+    if not barometer:
+        given = [flag for flag, value in (("--noise", noise_rms), ("--gain-spread", gain_spread or None), ("--offset-spread", offset_spread or None), ("--force-noise", force_noise or None)) if value is not None]
+        if given:
+            raise HydrotactError(f"{given[0]}: applies to barometer readings; add --barometer")
     if material is not None:
         from .data import material_prony, read_material
 
@@ -142,7 +146,7 @@ def run_simulate(sensor: str, probe_spec: str, trajectory_path, output, *, modul
     model = make_sensor_model(spec, field_kind=field, num_rays=num_rays)
     translations = np.asarray(trajectory.X_SR.translation)
     rotations = np.asarray(trajectory.rotation_vectors)
-    key = _resume_key(__version__, spec.name, json.dumps(spec.to_json(), sort_keys=True), probe_spec, field, num_rays, np.asarray(trajectory.times), translations, rotations)
+    key = _resume_key(__version__, "distinct-poses", spec.name, json.dumps(spec.to_json(), sort_keys=True), probe_spec, field, num_rays, np.asarray(trajectory.times), translations, rotations)
     partial = output.with_name(f".{output.name}.partial.npz")
     unit = UnitResponse(**compute_responses_resumably(model, probe, trajectory, partial, key, progress))
     samples = scale_unit_responses(model, material, trajectory.times, unit)
@@ -173,7 +177,6 @@ def run_simulate(sensor: str, probe_spec: str, trajectory_path, output, *, modul
         "log": str(output),
         **({"png": str(png)} if png is not None else {}),
     }
-
 
 
 def material_metadata(material) -> dict:

@@ -538,3 +538,11 @@ def test_bad_input_from_a_subprocess(tmp_path, args, fragments):
     assert_one_line_error(result, *fragments)
     assert result.stdout == ""
     assert not (tmp_path / "fit").exists()
+
+
+@pytest.mark.parametrize("flag", [["--noise", "1"], ["--gain-spread", "0.1"], ["--offset-spread", "5"], ["--force-noise", "0.01"]])
+def test_simulate_barometer_options_need_barometer(tmp_path, capsys, flag):
+    trajectory = _write_trajectory(tmp_path / "traj.csv")
+    output = tmp_path / "log.parquet"
+    args = ["simulate", "--sensor", "pad5x5", "--probe", "cylinder:d=2mm", "--trajectory", trajectory, "--units", "mm", *flag, "-o", output]
+    _assert_error_and_nothing_written(capsys, tmp_path, args, [flag[0], "--barometer"])
