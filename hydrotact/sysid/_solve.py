@@ -1,12 +1,14 @@
 """The solvers a fit can use, behind one call (pure, jittable).
 
-Least squares with optimistix (Levenberg–Marquardt by default; Gauss–Newton, Dogleg),
+Least squares with optimistix (Levenberg–Marquardt by default; Gauss–Newton with a
+backtracking line search, Dogleg),
 or minimisation of ½‖r‖² with optimistix's BFGS or jaxopt's bounded L-BFGS-B. The
 optimistix solutions are differentiable in the data through the implicit function
 theorem (`optimistix.ImplicitAdjoint`).
 """
 
 import warnings
+from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
@@ -18,6 +20,24 @@ import lineax as lx
 import optimistix as optx
 
 SOLVERS = ("lm", "gn", "dogleg", "bfgs", "lbfgsb")
+
+
+def _quiet(**_) -> None:
+    """The solver's verbose hook, silent."""
+
+
+class GaussNewtonArmijo(optx.AbstractGaussNewton):
+    """Gauss–Newton steps with a backtracking (Armijo) line search: plain
+    Gauss–Newton (optimistix.GaussNewton) takes every full step and can run off from
+    a start that Levenberg–Marquardt handles; the line search keeps each step a
+    decrease of ½‖r‖²."""
+
+    rtol: float
+    atol: float
+    norm: Callable = optx.max_norm
+    descent: optx.AbstractDescent = optx.NewtonDescent()
+    search: optx.AbstractSearch = optx.BacktrackingArmijo()
+    verbose: Callable = _quiet
 
 
 def solve_least_squares(residual_fn, x0, args, solver: str = "lm", *, rtol: float = 1e-10, atol: float = 1e-10, max_steps: int = 400, bounds=None):
@@ -35,7 +55,7 @@ def solve_least_squares(residual_fn, x0, args, solver: str = "lm", *, rtol: floa
             # parameters) and accurate enough for a step.
             method = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.Normal(lx.Cholesky()))
         else:
-            method = {"gn": optx.GaussNewton, "dogleg": optx.Dogleg}[solver](rtol=rtol, atol=atol)
+            method = {"gn": GaussNewtonArmijo, "dogleg": optx.Dogleg}[solver](rtol=rtol, atol=atol)
         solution = optx.least_squares(residual_fn, method, x0, args, max_steps=max_steps, throw=False)
         return solution.value, solution.stats["num_steps"], solution.result == optx.RESULTS.successful
     loss = lambda x, args: 0.5 * jnp.sum(residual_fn(x, args) ** 2)  # noqa: E731
