@@ -23,23 +23,28 @@ METHODS = ("auto", "contact", "indentation", "force", "signal")
 FORCE_THRESHOLD_N = 0.1
 QUIET_FACTOR = 2.0
 LEVEL_FACTOR = 6.0
-# The noise of a channel from its first differences: MAD -> std of a Gaussian, and
-# first differences of white noise have sqrt(2) times its std.
-_MAD_TO_STD = 1.4826
 
 
 def estimate_noise(channels: np.ndarray) -> np.ndarray:
-    """Each channel's white-noise std from the median absolute deviation of its first
-    differences (robust to steps and load ramps).
+    """Each channel's white-noise standard deviation, from its samples alone.
 
-    **Arguments:** `channels`: (num_samples, num_channels) pressures.
+    The median absolute second difference / (0.6745 √6): second differences cancel
+    steps' neighbours, ramps and slow drift, and the median ignores the few samples at
+    load changes. Floored at the quantisation noise implied by the smallest non-zero
+    step (LSB / √12: a quiet quantised channel can have a median difference of 0) and
+    at 1e-12 of the channel's level.
 
-    **Returns:** (num_channels,) std, Pa (at least 1e-12 of the channel's level).
+    **Arguments:** `channels`: (num_samples, num_channels) readings.
+
+    **Returns:** (num_channels,) standard deviations, in the readings' unit.
     """
-    differences = np.diff(channels, axis=0)
-    deviation = np.median(np.abs(differences - np.median(differences, axis=0)), axis=0)
-    sigma = _MAD_TO_STD * deviation / math.sqrt(2.0)
-    return np.maximum(sigma, 1e-12 * np.maximum(1.0, np.median(np.abs(channels), axis=0)))
+    values = np.asarray(channels, dtype=np.float64)
+    second = np.diff(values, n=2, axis=0)
+    sigma = np.median(np.abs(second), axis=0) / (0.6745 * math.sqrt(6.0))
+    steps = np.abs(np.diff(values, axis=0))
+    lsb = np.min(np.where(steps > 0.0, steps, np.inf), axis=0)
+    floor = np.where(np.isfinite(lsb), lsb / math.sqrt(12.0), 0.0)
+    return np.maximum(np.maximum(sigma, floor), 1e-12 * np.maximum(np.max(np.abs(values), axis=0), 1.0))
 
 
 def _min_samples(times: np.ndarray, duration: float) -> int:
@@ -174,7 +179,7 @@ def find_no_load_segments(
     With `method` "auto" the first the log allows of: its `contact` flag (0), its
     `indentation` (<= 0), its force columns (|(fx, fy, fz)| or |fn| <= `force_threshold`
     N), else the `signal`: quiet stretches (every channel's rolling std within
-    `quiet_factor` times its noise, estimated from the MAD of first differences) lying
+    `quiet_factor` times its noise, estimated by :func:`estimate_noise`) lying
     on the channels' low baseline (no channel's mean more than `level_factor` noise stds
     above what the neighbouring quiet stretches predict, linearly in time, so a drifting
     baseline is followed and a held load is not taken for one).

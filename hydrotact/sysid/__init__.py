@@ -11,7 +11,7 @@ from ._fit import (
     make_initial_guess as make_initial_guess,
 )
 from ._model import ParameterLayout as ParameterLayout, calc_predictions as calc_predictions, calc_residuals as calc_residuals
-from ._problem import FitProblem as FitProblem, LogArrays as LogArrays, estimate_noise as estimate_noise, make_fit_problem as make_fit_problem
+from ._problem import FitProblem as FitProblem, LogArrays as LogArrays, make_fit_problem as make_fit_problem
 from ._relaxation import RelaxationFit as RelaxationFit, fit_relaxation_curve as fit_relaxation_curve
 from ._report import make_fit_material as make_fit_material, make_report as make_report, write_fit_outputs as write_fit_outputs
 from ._solve import SOLVERS as SOLVERS, solve_least_squares as solve_least_squares

@@ -34,6 +34,7 @@ import numpy as np
 
 from .._errors import HydrotactError
 from .._types import Array, Float, Int
+from ..data import estimate_noise
 
 FORCE_COLUMNS = ("fx", "fy", "fz")
 POSE_COLUMNS = ("probe_x", "probe_y", "probe_z")
@@ -107,21 +108,6 @@ class FitProblem(eqx.Module):
         so that logs of the same shapes share one compilation (the descriptions are
         static and differ from log to log)."""
         return FitProblem(logs=self.logs, mode=self.mode, gain_names=self.gain_names, infos=())
-
-
-def estimate_noise(values: np.ndarray) -> np.ndarray:
-    """Per-column white-noise standard deviation of (T, C) samples: the median absolute
-    second difference / (0.6745 √6), which ignores steps, ramps and slow drift; floored
-    at the quantisation noise implied by the smallest non-zero step (LSB / √12)."""
-    values = np.asarray(values, dtype=np.float64)
-    second = np.diff(values, n=2, axis=0)
-    sigma = np.median(np.abs(second), axis=0) / (0.6745 * np.sqrt(6.0))
-    steps = np.abs(np.diff(values, axis=0))
-    steps = np.where(steps > 0.0, steps, np.inf)
-    lsb = np.min(steps, axis=0)
-    floor = np.where(np.isfinite(lsb), lsb / np.sqrt(12.0), 0.0)
-    scale = np.max(np.abs(values), axis=0)
-    return np.maximum(np.maximum(sigma, floor), 1e-12 * np.maximum(scale, 1.0))
 
 
 def _file_digest(path) -> str | None:
