@@ -37,7 +37,6 @@ def make_fit_material(result: FitResult, paths=(), name: str | None = None) -> d
     terms = result.terms
     index = _material_order(result)
     covariance = result.covariance[np.ix_(index, index)]
-    parameters = [result.names[k] for k in index]
     count = result.layout.num_terms
     parameters = (["log_long_term_modulus"] if result.layout.has_long_term else []) + [f"log_modulus_{k + 1}" for k in range(count)] + [f"log_tau_{k + 1}" for k in range(count)]
     channels = []
