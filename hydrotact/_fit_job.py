@@ -45,9 +45,12 @@ def read_logs(paths, mapping=None, sensor=None, report_warning=None):
     return logs
 
 
-def run_fit(paths, output, *, sensor=None, lumped=False, indentation="indentation", mapping=None, terms="auto", solver="lm", field=None, num_rays=None, progress=True, report_warning=None) -> dict:
+def run_fit(paths, output, *, sensor=None, lumped=False, indentation="indentation", mapping=None, terms="auto", solver="lm", tare=False, field=None, num_rays=None, progress=True, report_warning=None) -> dict:
     """Fit the logs at `paths` and write material.json, report.json and plots into
-    `output`. Returns the report (with `files`)."""
+    `output`. With `tare`, each log is first tared on its no-load segments (found
+    automatically; the baseline interpolated in time between them), which takes out
+    the slow drift of aged sensors that constant offsets cannot. Returns the report
+    (with `files`)."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     from .sysid import fit_auto, fit_problem, make_fit_problem, write_fit_outputs
@@ -59,6 +62,10 @@ def run_fit(paths, output, *, sensor=None, lumped=False, indentation="indentatio
         raise HydrotactError(f"--solver: unknown solver {solver!r}; use one of {', '.join(SOLVERS)}")
     terms = parse_terms(terms)
     logs = read_logs([Path(p) for p in paths], mapping, sensor, report_warning)
+    if tare:
+        from .data import tare_log
+
+        logs = [tare_log(log, source=str(path))[0] for log, path in zip(logs, paths)]
     mode = "lumped" if lumped else "full"
     problem = make_fit_problem(logs, mode=mode, indentation=indentation, field=field, num_rays=num_rays, sources=[str(p) for p in paths], progress=progress)
     counts = list(range(MAX_AUTO_TERMS + 1)) if terms == "auto" else [terms]

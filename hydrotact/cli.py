@@ -87,6 +87,7 @@ def _parser() -> argparse.ArgumentParser:
     fit.add_argument("--mapping", type=Path, metavar="MAP.json", help="column mapping for logs of your own layout")
     fit.add_argument("--terms", default="auto", metavar="N|auto", help="Prony terms, or auto (lowest BIC over 0-4; default)")
     fit.add_argument("--solver", default="lm", choices=["lm", "gn", "dogleg", "bfgs", "lbfgsb"], help="lm (Levenberg-Marquardt, default), gn, dogleg, bfgs or lbfgsb (jaxopt, bounded)")
+    fit.add_argument("--tare", action="store_true", help="tare each log on its no-load segments first (drifting, aged sensors)")
     fit.add_argument("--field", choices=["laplace", "distance"], help="full mode: the sensor's strain field (default: the log's, else laplace)")
     fit.add_argument("--rays", type=int, metavar="N", help="full mode: rays per taxel (default: the log's, else 64)")
     fit.add_argument("-o", "--output", required=True, type=Path, metavar="FITDIR", help="folder for material.json, report.json and plots")
@@ -137,7 +138,7 @@ def _run(args) -> None:
 
         report = run_fit(
             args.logs, args.output, sensor=args.sensor, lumped=args.lumped, indentation=args.indentation, mapping=args.mapping,
-            terms=args.terms, solver=args.solver, field=args.field, num_rays=args.rays, progress=not args.json, report_warning=warn,
+            terms=args.terms, solver=args.solver, tare=args.tare, field=args.field, num_rays=args.rays, progress=not args.json, report_warning=warn,
         )
         if args.json:
             print(json.dumps(report, indent=2))

@@ -155,6 +155,28 @@ def test_jittery_log_warns_and_fits(tmp_path, capsys, lumped_log):
     assert sorted(p.name for p in output.iterdir()) == FIT_FILES
 
 
+def test_tare_takes_out_drift(tmp_path, capsys, lumped_log):
+    """An aged sensor: each channel drifts linearly (0.5-2 Pa/s, hundreds of noise σ
+    over the log). Constant offsets cannot follow it; --tare (baselines interpolated
+    between the no-load segments, found from the indentation column) can."""
+    drift = np.array([0.5, -1.0, 2.0, 1.5])
+    times = lumped_log.times
+    columns = dict(lumped_log.columns)
+    for k, name in enumerate(lumped_log.metadata["channels"]):
+        columns[name] = columns[name] + drift[k] * times
+    path = tmp_path / "aged.parquet"
+    write_log(path, BarometerLog(metadata=dict(lumped_log.metadata), columns=columns))
+    reports = {}
+    for flags in ([], ["--tare"]):
+        output = tmp_path / ("tared" if flags else "raw")
+        code, out, err = _run(capsys, "fit", path, "--lumped", "--terms", "2", *flags, "-o", output, "--json")
+        assert code == 0, err
+        reports[bool(flags)] = json.loads(out)
+    assert reports[False]["reduced_chi_square"] > 10.0
+    assert reports[True]["reduced_chi_square"] < 1.5
+    np.testing.assert_allclose(_relative_taus(reports[True]), LUMPED_TRUTH["taus"], rtol=0.05)
+
+
 # --- full mode: simulate, then fit ---------------------------------------------------
 
 FULL_TRUTH = {"long_term_modulus": 6e5, "moduli": [2e5], "taus": [1.0]}
