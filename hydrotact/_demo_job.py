@@ -70,7 +70,7 @@ def run_demo(out_dir, progress: bool = True, smoke: bool = False) -> dict:
     (0.3 s, 3 s), 16 rays: the same job at test-suite size."""
     from ._fit_job import print_fit_table, run_fit
     from ._simulate_job import run_simulate
-    from .data import make_material_document, write_material
+    from .data import make_material_document, read_log, write_material
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -91,7 +91,7 @@ def run_demo(out_dir, progress: bool = True, smoke: bool = False) -> dict:
         gain_spread=0.05, offset_spread=30.0, force_noise=0.005, num_rays=16 if smoke else 32, png=out_dir / "demo_log.png", progress=progress,
     )
     report = run_fit([log_path], out_dir / "fit", terms=2 if smoke else "auto", progress=progress)
-    log_metadata = json.loads(json.dumps(_log_metadata(log_path)))
+    log_metadata = read_log(log_path).metadata
     gains = {f"pad5x5/{name}": g for name, g in zip(log_metadata["channels"], log_metadata["barometer"]["gains"])}
     truth_numbers = {**truth_numbers, "instantaneous_modulus": truth_numbers["long_term_modulus"] + sum(truth_numbers["moduli"]), "gains": gains}
     print_fit_table(report, truth_numbers)
@@ -105,8 +105,3 @@ def run_demo(out_dir, progress: bool = True, smoke: bool = False) -> dict:
     write_text_atomic(out_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
     return summary
 
-
-def _log_metadata(path) -> dict:
-    from .data import read_log
-
-    return read_log(path).metadata

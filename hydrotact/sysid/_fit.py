@@ -26,6 +26,19 @@ from ._solve import SOLVERS, calc_jacobian, solve_least_squares
 MAX_AUTO_TERMS = 4
 
 
+def calc_covariance(chi_square: float, normal: np.ndarray, num_residuals: int) -> np.ndarray:
+    """The parameters' covariance s² (JᵀJ)⁺ from the normal matrix JᵀJ of residuals
+    already divided by their noise, s² = χ² / (N − P) the reduced chi-square."""
+    dof = max(1, num_residuals - normal.shape[0])
+    return float(chi_square) / dof * np.linalg.pinv(normal, rcond=1e-13, hermitian=True)
+
+
+def calc_bic(chi_square: float, num_residuals: int, num_parameters: int) -> float:
+    """The Bayesian information criterion N ln(χ²/N) + P ln N."""
+    n = num_residuals
+    return float(n * np.log(max(chi_square, 1e-300) / n) + num_parameters * np.log(n))
+
+
 @dataclasses.dataclass(frozen=True)
 class Estimate:
     """A fitted number and its standard error."""
@@ -70,8 +83,7 @@ class FitResult:
 
     @property
     def bic(self) -> float:
-        n = self.num_residuals
-        return float(n * np.log(max(self.chi_square, 1e-300) / n) + self.layout.size * np.log(n))
+        return calc_bic(self.chi_square, self.num_residuals, self.layout.size)
 
     @property
     def std_log(self) -> np.ndarray:
@@ -97,7 +109,7 @@ class FitResult:
     @property
     def instantaneous_modulus(self) -> Estimate:
         """E(0) = E∞ + Σ Eᵢ, its error from the covariance (gradient of a sum of exps)."""
-        k = [self.names.index(n) for n in self.names if n == "log_long_term_modulus" or n.startswith("log_modulus_")]
+        k = [i for i, name in enumerate(self.names) if name == "log_long_term_modulus" or name.startswith("log_modulus_")]
         values = np.exp(self.x[k])
         value = float(values.sum() + (0.0 if self.layout.has_long_term else 1.0))
         return Estimate(value, float(np.sqrt(max(values @ self.covariance[np.ix_(k, k)] @ values, 0.0))))
@@ -190,7 +202,7 @@ def make_initial_guess(problem: FitProblem, num_terms: int) -> tuple[ParameterLa
             channel_scales = np.maximum(spread, 1e-12)
             scales.append(channel_scales)
         blocks.append(design_block(log.times, inputs, observed, log.weights, count, channel_scales, grid))
-    moduli = fit_linear_moduli(blocks, grid)
+    moduli = fit_linear_moduli(blocks)
     total = max(float(moduli.sum()), 1e-300)
     floor = _MODULUS_FLOOR * total
     long_term = max(float(moduli[0]), floor)
@@ -241,9 +253,7 @@ def fit_problem(problem: FitProblem, num_terms: int, solver: str = "lm", *, rtol
     bounds = _bounds(problem, layout, x0) if solver == "lbfgsb" else None
     x, steps, converged, chi_square, normal = _run(problem.without_infos(), layout, jnp.asarray(x0), solver, bounds, rtol, atol, max_steps)
     num_residuals = problem.num_samples
-    dof = max(1, num_residuals - layout.size)
-    normal = np.asarray(normal)
-    covariance = float(chi_square) / dof * np.linalg.pinv(normal, rcond=1e-13, hermitian=True)
+    covariance = calc_covariance(float(chi_square), np.asarray(normal), num_residuals)
     return FitResult(
         problem=problem,
         layout=layout,

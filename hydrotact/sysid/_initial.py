@@ -70,7 +70,7 @@ def merge_terms(taus: np.ndarray, moduli: np.ndarray, num_terms: int, floor: flo
     return merged_taus[order], np.maximum(merged_moduli[order], floor)
 
 
-def fit_linear_moduli(blocks, taus: np.ndarray) -> np.ndarray:
+def fit_linear_moduli(blocks) -> np.ndarray:
     """NNLS moduli [E∞, E_g...] for stacked (design, target) blocks (host)."""
     design = np.concatenate([block[0] for block in blocks])
     target = np.concatenate([block[1] for block in blocks])

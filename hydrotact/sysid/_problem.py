@@ -273,6 +273,5 @@ def make_fit_problem(logs, *, mode: str = "full", indentation: str = "indentatio
                 num_channels=num_channels,
             )
         )
-        path = getattr(log, "path", None) or source
-        infos.append(LogInfo(source=source, channels=channels, excluded=excluded, force_columns=force_columns, sensor=log.metadata.get("sensor"), pressure=log.metadata.get("pressure", "absolute"), sha256=_file_digest(path), noise=tuple(float(v) for v in noise)))
+        infos.append(LogInfo(source=source, channels=channels, excluded=excluded, force_columns=force_columns, sensor=log.metadata.get("sensor"), pressure=log.metadata.get("pressure", "absolute"), sha256=_file_digest(source), noise=tuple(float(v) for v in noise)))
     return FitProblem(logs=tuple(prepared), mode=mode, gain_names=tuple(gain_names), infos=tuple(infos))

@@ -15,7 +15,7 @@ import numpy as np
 
 from .._errors import HydrotactError
 from ..visco import Prony
-from ._fit import MAX_AUTO_TERMS, Estimate
+from ._fit import MAX_AUTO_TERMS, Estimate, calc_bic, calc_covariance
 from ._initial import _MODULUS_FLOOR, fit_linear_moduli, merge_terms
 from ._solve import SOLVERS, calc_jacobian, solve_least_squares
 
@@ -69,7 +69,7 @@ def fit_relaxation_curve(times, modulus, num_terms="auto", solver: str = "lm", m
     positive = times[times > 0.0]
     grid = np.logspace(np.log10(positive.min()) - 0.5, np.log10(times.max()) + 0.5, max(4, int(4 * np.log10(times.max() / positive.min())) + 5))
     design = np.column_stack([np.ones_like(times), np.exp(-times[:, None] / grid)]) * weights[:, None]
-    moduli = fit_linear_moduli([(design, modulus * weights)], grid)
+    moduli = fit_linear_moduli([(design, modulus * weights)])
     floor = _MODULUS_FLOOR * max(float(moduli.sum()), 1e-300)
     taus, term_moduli = merge_terms(grid, moduli[1:], int(num_terms), floor)
     x0 = np.concatenate([[np.log(max(moduli[0], floor))], np.log(term_moduli), np.log(taus)])
@@ -79,7 +79,7 @@ def fit_relaxation_curve(times, modulus, num_terms="auto", solver: str = "lm", m
     jacobian = np.asarray(calc_jacobian(_residuals, x, data))
     chi_square = float(np.sum(residuals**2))
     n, p = len(times), len(x0)
-    covariance = chi_square / max(1, n - p) * np.linalg.pinv(jacobian.T @ jacobian, rcond=1e-13, hermitian=True)
+    covariance = calc_covariance(chi_square, jacobian.T @ jacobian, n)
     x = np.asarray(x)
     std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
     count = int(num_terms)
@@ -90,7 +90,7 @@ def fit_relaxation_curve(times, modulus, num_terms="auto", solver: str = "lm", m
         terms=terms,
         covariance=covariance,
         residual_rms=float(np.sqrt(np.mean((modulus - fitted) ** 2))),
-        bic=float(n * np.log(max(chi_square, 1e-300) / n) + p * np.log(n)),
+        bic=calc_bic(chi_square, n, p),
         converged=bool(converged),
         seconds=time.perf_counter() - start,
     )
