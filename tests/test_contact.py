@@ -134,10 +134,14 @@ def test_overflow_is_detected_and_retried():
     field = make_pressure_field(mesh := make_seed_mesh("pad5x5", 1.1e-3), calc_distance_field(mesh), E)
     probe = make_cylinder_probe(2e-3, num_sides=16)
     X = make_pose([0.0, 0.0, 3.5e-3])
+    # Each soft-rigid buffer reports its own overflow: the candidate pairs (boxes
+    # overlap), then, once those fit, the polygons (the pairs the plane tests keep).
     small = calc_soft_rigid_surface(field, probe, X, Capacity(64, 64, 128, 128))
-    assert bool(small.overflow) and int(small.needed[3]) > 128
+    assert bool(small.overflow) and int(small.needed[2]) > 128
+    small = calc_soft_rigid_surface(field, probe, X, Capacity(64, 64, 8192, 128))
+    assert bool(small.overflow) and int(small.needed[3]) > 128 and int(small.needed[2]) <= 8192
     surface, capacity = compute_contact_surface(field, probe, X, Capacity(64, 64, 128, 128))
-    assert not bool(surface.overflow) and capacity.polygons > 128
+    assert not bool(surface.overflow) and capacity.pairs > 128 and capacity.polygons > 128
     # The half-space's two buffers (tets by cluster, then polygons) grow as well.
     X_half = make_pose([0.0, 0.0, 3.5e-3])
     small = calc_half_space_surface(field, X_half, Capacity(64, 0, 0, 64), clusters=make_tet_clusters(field.vertices, field.tets))
@@ -208,7 +212,7 @@ def _pad_setup():
 def test_gradients_wrt_pose_modulus_and_field_soft_rigid(rng):
     mesh, strain = _pad_setup()
     probe = make_sphere_probe(1.5e-3, subdivisions=2)
-    capacity = Capacity(2048, 512, 0, 4096)
+    capacity = Capacity(2048, 512, 16384, 4096)
 
     def summary(translation, rotation_vector, modulus, strain):
         field = make_pressure_field(mesh, strain, modulus)

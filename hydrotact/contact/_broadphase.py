@@ -20,8 +20,9 @@ class Capacity(eqx.Module):
 
     - `tets`: soft tets near the other body (in whole clusters when clustered).
     - `others`: rigid triangles (or the other soft body's tets) near the soft body.
-    - `pairs`: not used by the current kernels (kept so existing code keeps
-      working; `needed[2]` reads 0 except for brute force).
+    - `pairs`: soft-rigid candidate pairs, (tet, triangle) whose boxes overlap,
+      which the finer plane tests then sort (not used by the half-space and
+      soft-soft kernels: their `needed[2]` reads 0).
     - `polygons`: the contact polygons, the size of the returned surface: the
       candidate pairs that survive the separating-plane tests (soft-rigid), the cut
       tets (half-space), the overlapping tet pairs (soft-soft).
@@ -29,7 +30,7 @@ class Capacity(eqx.Module):
 
     tets: int = eqx.field(static=True, default=256)
     others: int = eqx.field(static=True, default=256)
-    pairs: int = eqx.field(static=True, default=1024)
+    pairs: int = eqx.field(static=True, default=4096)
     polygons: int = eqx.field(static=True, default=1024)
 
     def grown_to(self, needed) -> "Capacity":

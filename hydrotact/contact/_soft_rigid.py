@@ -76,50 +76,46 @@ def _triangle_columns(triangles, normals):
     return jnp.concatenate([triangles.reshape(-1, 9), lo, hi, normals, offset, *edges, *lengths, reach], axis=1).T
 
 
-def _pairs_may_meet(tet, triangle):
-    """Which of S tets and T triangles may meet, as a dense (S, T) mask (`tet` (43, S)
-    from `_tet_columns`, `triangle` (35, T) from `_triangle_columns`).
-
-    A pair is kept when the boxes overlap, the tet straddles the triangle's plane, and
-    no tet face plane and no triangle edge plane separates them. Every plane is a face
-    of one of the two convex bodies, so no pair whose intersection has positive area
-    is culled; the face and edge tests cull only pairs apart by more than
-    SEPARATION_TOLERANCE times the coordinates' magnitude (far above round-off).
-    Written as (S, 1) against (1, T) rows so that it vectorises on the CPU.
-    """
-
-    def by_tet(row):
-        return tet[row][:, None]
-
-    def by_triangle(row):
-        return triangle[row][None, :]
-
+def _boxes_meet(tet, triangle):
+    """Whether the boxes of tets and triangles overlap (`tet` rows from `_tet_columns`,
+    `triangle` rows from `_triangle_columns`, each row shaped to broadcast against the
+    other's: (S, 1) against (1, T) for every tet against every triangle)."""
     meet = None
     for axis in range(3):
-        overlap = (by_tet(12 + axis) <= by_triangle(12 + axis)) & (by_triangle(9 + axis) <= by_tet(15 + axis))
+        overlap = (tet[12 + axis] <= triangle[12 + axis]) & (triangle[9 + axis] <= tet[15 + axis])
         meet = overlap if meet is None else meet & overlap
-    heights = [
-        by_tet(3 * k) * by_triangle(15) + by_tet(3 * k + 1) * by_triangle(16) + by_tet(3 * k + 2) * by_triangle(17) - by_triangle(18)
-        for k in range(4)
-    ]
+    return meet
+
+
+def _planes_may_meet(tet, triangle):
+    """Whether tets and triangles whose boxes overlap may meet: the tet straddles the
+    triangle's plane, and no tet face plane and no triangle edge plane separates them
+    (rows as in :func:`_boxes_meet`, here one pair per column).
+
+    Every plane is a face of one of the two convex bodies, so no pair whose
+    intersection has positive area is culled; the face and edge tests cull only pairs
+    apart by more than SEPARATION_TOLERANCE times the coordinates' magnitude (far
+    above round-off).
+    """
+    heights = [tet[3 * k] * triangle[15] + tet[3 * k + 1] * triangle[16] + tet[3 * k + 2] * triangle[17] - triangle[18] for k in range(4)]
     lowest = jnp.minimum(jnp.minimum(heights[0], heights[1]), jnp.minimum(heights[2], heights[3]))
     highest = jnp.maximum(jnp.maximum(heights[0], heights[1]), jnp.maximum(heights[2], heights[3]))
-    meet = meet & (lowest <= 0.0) & (highest >= 0.0)
-    scale = SEPARATION_TOLERANCE * jnp.maximum(by_tet(38), by_triangle(34))
+    meet = (lowest <= 0.0) & (highest >= 0.0)
+    scale = SEPARATION_TOLERANCE * jnp.maximum(tet[38], triangle[34])
     for f in range(4):
         row = 18 + 4 * f
         nearest = None
         for v in range(3):
-            d = by_tet(row) * by_triangle(3 * v) + by_tet(row + 1) * by_triangle(3 * v + 1) + by_tet(row + 2) * by_triangle(3 * v + 2)
+            d = tet[row] * triangle[3 * v] + tet[row + 1] * triangle[3 * v + 1] + tet[row + 2] * triangle[3 * v + 2]
             nearest = d if nearest is None else jnp.minimum(nearest, d)
-        meet = meet & (nearest - by_tet(row + 3) <= scale * by_tet(34 + f))
+        meet = meet & (nearest - tet[row + 3] <= scale * tet[34 + f])
     for e in range(3):
         row = 19 + 4 * e
         nearest = None
         for k in range(4):
-            d = by_tet(3 * k) * by_triangle(row) + by_tet(3 * k + 1) * by_triangle(row + 1) + by_tet(3 * k + 2) * by_triangle(row + 2)
+            d = tet[3 * k] * triangle[row] + tet[3 * k + 1] * triangle[row + 1] + tet[3 * k + 2] * triangle[row + 2]
             nearest = d if nearest is None else jnp.minimum(nearest, d)
-        meet = meet & (nearest - by_triangle(row + 3) <= scale * by_triangle(31 + e))
+        meet = meet & (nearest - triangle[row + 3] <= scale * triangle[31 + e])
     return meet
 
 
@@ -141,10 +137,11 @@ def calc_soft_rigid_surface(
 
     Broad phase: the tets (found through their clusters) and the triangles whose
     boxes meet both bodies' boxes (`tets`, `others` buffers); then every such tet
-    against every such triangle, at once: boxes, the triangle's plane, the tet's face
-    planes and the triangle's edge planes (:func:`_pairs_may_meet`); the pairs that
-    pass (`polygons`) are clipped, in column layout (see `_polygon.py`). The `pairs`
-    buffer is not used here (`needed[2]` is 0).
+    against every such triangle by their boxes, at once (the pairs whose boxes meet
+    fill the `pairs` buffer); on those pairs only, the triangle's plane, the tet's
+    face planes and the triangle's edge planes (:func:`_planes_may_meet`); the pairs
+    that pass (`polygons`) are clipped, in column layout (see `_polygon.py`). When
+    `pairs` overflows, `needed[3]` counts only the pairs that fitted.
     """
     dtype = field.vertices.dtype
     vertices_S = X_SR.apply(jnp.asarray(rigid.vertices_R, dtype))
@@ -188,22 +185,28 @@ def calc_soft_rigid_surface(
         tris, tris_valid, num_tris = select(boxes_overlap(tri_lo, tri_hi, region_lo[None], region_hi[None]), capacity.others)
         tris = jnp.maximum(tris, 0)
         tri_rows = triangle_columns[:, tris].T
-        # Every near tet against every near triangle, at once; then the survivors.
-        may_meet = _pairs_may_meet(near_rows.T, tri_rows.T)
-        may_meet = may_meet & near_valid[:, None] & tris_valid[None, :]
+        # Every near tet against every near triangle by their boxes (cheap, dense);
+        # the finer plane tests only on the pairs whose boxes meet; then the survivors.
+        boxes_meet = _boxes_meet(near_rows.T[:, :, None], tri_rows.T[:, None, :])
+        boxes_meet = boxes_meet & near_valid[:, None] & tris_valid[None, :]
+        candidate, candidate_valid, num_candidates = select(boxes_meet, capacity.pairs)
+        candidate = jnp.maximum(candidate, 0)
+        i, j = candidate // tris.shape[0], candidate % tris.shape[0]
+        candidate_tets, candidate_triangles = near_rows[i].T, tri_rows[j].T  # gathers from the small near lists
+        may_meet = candidate_valid & _planes_may_meet(candidate_tets, candidate_triangles)
         chosen, pair_valid, num_polygons = select(may_meet, capacity.polygons)
         chosen = jnp.maximum(chosen, 0)
-        i, j = chosen // tris.shape[0], chosen % tris.shape[0]
-        tet_index, tri_index = near_tets[i], tris[j]
-        pair_tets, pair_triangles = near_rows[i].T, tri_rows[j].T  # gathers from the small near lists
+        tet_index, tri_index = near_tets[i[chosen]], tris[j[chosen]]
+        pair_tets, pair_triangles = near_rows[i[chosen]].T, tri_rows[j[chosen]].T
         search_slots = num_cluster_slots * cluster_size
         needed = jnp.array(
-            [jnp.maximum(num_near, -(-num_hit * cluster_size // CLUSTER_SEARCH)), num_tris, 0, num_polygons]
+            [jnp.maximum(num_near, -(-num_hit * cluster_size // CLUSTER_SEARCH)), num_tris, num_candidates, num_polygons]
         )
         overflow = (
             (num_hit * cluster_size > search_slots)
             | (num_near > capacity.tets)
             | (num_tris > capacity.others)
+            | (num_candidates > capacity.pairs)
             | (num_polygons > capacity.polygons)
         )
 

@@ -19,7 +19,8 @@ class ContactSurface(eqx.Module):
 
     `overflow` is True when more candidates existed than the buffers hold: the surface
     is then incomplete, and the host entry points retry with larger buffers or raise;
-    `needed` says how many entries each buffer (tets, others, pairs) would have needed.
+    `needed` says how many entries each buffer (tets, others, pairs, polygons) would
+    have needed.
 
     **Fields:**
 
@@ -32,8 +33,8 @@ class ContactSurface(eqx.Module):
     - `first_moments_S`: (capacity, 3) int x dA; `pressure_moments_S`: (capacity, 3) int p x dA.
     - `tet_index`, `other_index`: (capacity,) the soft tet, and the rigid triangle or
       the other body's tet (-1 for a half-space).
-    - `overflow`: scalar; `needed`: (3,) entries needed by the tets, others and pairs
-      buffers of the broad phase.
+    - `overflow`: scalar; `needed`: (4,) entries needed by the tets, others, pairs and
+      polygons buffers (see :class:`Capacity`).
     """
 
     vertices_S: Float[Array, "capacity 8 3"]
@@ -48,7 +49,7 @@ class ContactSurface(eqx.Module):
     tet_index: Int[Array, " capacity"]
     other_index: Int[Array, " capacity"]
     overflow: Bool[Array, ""]
-    needed: Int[Array, " 3"]
+    needed: Int[Array, " 4"]
 
     @property
     def capacity(self) -> int:
