@@ -8,8 +8,9 @@ Poses sweep the probe across the sensor at a fixed depth.
 - Drake: `QueryObject.ComputeContactSurfaces` (polygons), one pose at a time, after
   updating the free body's pose; mean seconds per query.
 - hydrotact: the contact surface and its wrench for a batch of poses in one jitted
-  call (vmap over chunks of 64 poses, lax.map over chunks, so memory stays bounded),
-  float64, with the clustered tet search; timed after compilation, median of repeats.
+  call (vmap over chunks of poses, lax.map over chunks: by default chunks of
+  hydrotact's CPU_POSE_GROUP on a CPU, the whole batch on an accelerator), float64,
+  with the clustered tet search; timed after compilation, median of repeats.
 
 Run: `.venv/bin/python benchmarks/contact.py [--batches 1 64 4096]`.
 """
@@ -33,6 +34,7 @@ sys.path.insert(0, str(Path(__file__).parents[1] / "tests"))
 from drake_reference import DrakeScene  # noqa: E402
 
 from hydrotact.contact import (  # noqa: E402
+    CPU_POSE_GROUP,
     Capacity,
     HalfSpace,
     calc_contact_surface,
@@ -45,7 +47,6 @@ from hydrotact.field import calc_distance_field, make_pressure_field  # noqa: E4
 from hydrotact.mesh import make_seed_mesh, read_mesh, write_mesh  # noqa: E402
 
 MODULUS = 2e5
-CHUNK = 64
 
 
 def _poses(case, count):
@@ -77,7 +78,7 @@ def _drake_seconds_per_query(vtk_path, other, translations, repeats=3):
     return statistics.median(timings)
 
 
-def _ours_seconds_per_batch(field, other, translations, capacity, chunk=CHUNK, repeats=3):
+def _ours_seconds_per_batch(field, other, translations, capacity, chunk, repeats=3):
     clusters = make_tet_clusters(field.vertices, field.tets)
 
     def wrench(translation):
@@ -93,7 +94,9 @@ def _ours_seconds_per_batch(field, other, translations, capacity, chunk=CHUNK, r
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--batches", type=int, nargs="+", default=[1, 64, 4096])
-    parser.add_argument("--chunk", type=int, default=CHUNK, help="poses per vmapped chunk (lax.map over chunks)")
+    parser.add_argument(
+        "--chunk", type=int, help="poses per vmapped chunk (lax.map over chunks); default: CPU_POSE_GROUP on a CPU, the batch elsewhere"
+    )
     args = parser.parse_args()
     from pydrake.geometry import HalfSpace as DrakeHalfSpace
 
@@ -119,12 +122,13 @@ def main():
                 field, ours_other, jax.vmap(make_pose)(jnp.asarray(_poses(case, 64))), Capacity(64, 64, 64, 256)
             )
             for batch in args.batches:
-                seconds, _ = _ours_seconds_per_batch(field, ours_other, _poses(case, batch), capacity, args.chunk)
+                chunk = args.chunk or (CPU_POSE_GROUP if jax.default_backend() == "cpu" else batch)
+                seconds, _ = _ours_seconds_per_batch(field, ours_other, _poses(case, batch), capacity, chunk)
                 row = {
                     "case": case,
                     "batch": batch,
                     "capacity": list(capacity.sizes),
-                    "chunk": min(args.chunk, batch),
+                    "chunk": min(chunk, batch),
                     "ours_surfaces_per_s": batch / seconds,
                     "drake_surfaces_per_s": 1.0 / drake_seconds,
                     "ratio": (batch / seconds) * drake_seconds,

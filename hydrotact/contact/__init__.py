@@ -1,7 +1,12 @@
 """Hydroelastic contact: soft-rigid, soft-half-space and soft-soft contact surfaces,
 and the wrench they exert."""
 
-from ._api import calc_contact_surface as calc_contact_surface, compute_contact_surface as compute_contact_surface
+from ._api import (
+    CPU_POSE_GROUP as CPU_POSE_GROUP,
+    calc_contact_surface as calc_contact_surface,
+    compute_contact_surface as compute_contact_surface,
+    map_over_poses as map_over_poses,
+)
 from ._broadphase import Capacity as Capacity, TetClusters as TetClusters, make_tet_clusters as make_tet_clusters
 from ._half_space import calc_half_space_surface as calc_half_space_surface
 from ._polygon import calc_polygon_integrals as calc_polygon_integrals, clip_polygon as clip_polygon

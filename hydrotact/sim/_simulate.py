@@ -26,7 +26,7 @@ import numpy as np
 
 from .._math import safe_div, safe_norm
 from .._types import Array, Bool, Float, Int
-from ..contact import Capacity, Pose, calc_contact_surface
+from ..contact import Capacity, Pose, calc_contact_surface, map_over_poses
 from ..contact._api import grown_contact_capacity
 from ..taxel import calc_taxel_pressures, grown_capacity
 from ._model import Material, SensorModel
@@ -173,7 +173,7 @@ def calc_simulation(model: SensorModel, material: Material, probe, trajectory: T
 
 @eqx.filter_jit
 def _chunk_response(model, probe, X_SR, capacity):
-    return jax.vmap(calc_unit_response, in_axes=(None, None, 0, None))(model, probe, X_SR, capacity)
+    return map_over_poses(lambda X: calc_unit_response(model, probe, X, capacity), X_SR)
 
 
 def grown_sim_capacity(capacity: SimCapacity, unit: UnitResponse) -> SimCapacity:
@@ -187,7 +187,7 @@ def grown_sim_capacity(capacity: SimCapacity, unit: UnitResponse) -> SimCapacity
     return SimCapacity(contact=contact, taxel_pairs=taxel_pairs)
 
 
-def compute_unit_responses(model: SensorModel, probe, X_SR: Pose, capacity: SimCapacity | None = None, chunk: int = 64, progress: bool = False):
+def compute_unit_responses(model: SensorModel, probe, X_SR: Pose, capacity: SimCapacity | None = None, chunk: int = 128, progress: bool = False):
     """Unit responses for a batch of poses, in jitted chunks of `chunk` poses, growing
     buffers (and recomputing the chunk) whenever one overflows (host).
 
