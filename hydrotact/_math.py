@@ -5,10 +5,13 @@ import jax.numpy as jnp
 
 def safe_norm(x, axis=-1, keepdims=False):
     """Euclidean norm along `axis` whose gradient at x = 0 is 0 instead of NaN."""
-    squared = jnp.sum(x * x, axis=axis, keepdims=keepdims)
+    return safe_sqrt(jnp.sum(x * x, axis=axis, keepdims=keepdims))
+
+
+def safe_sqrt(squared):
+    """sqrt of a non-negative value whose gradient at 0 is 0 instead of inf."""
     is_zero = squared == 0.0
-    safe_squared = jnp.where(is_zero, 1.0, squared)
-    return jnp.where(is_zero, 0.0, jnp.sqrt(safe_squared))
+    return jnp.where(is_zero, 0.0, jnp.sqrt(jnp.where(is_zero, 1.0, squared)))
 
 
 def safe_div(numerator, denominator):

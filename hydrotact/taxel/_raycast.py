@@ -3,10 +3,22 @@ triangle soup carrying pressure at its corners."""
 
 import jax.numpy as jnp
 
-from .._math import safe_div, safe_norm
+from .._math import safe_div, safe_sqrt
 
 PARALLEL_TOLERANCE = 1e-12  # |sin| of the ray-to-plane angle below which a ray is parallel
 EDGE_TOLERANCE = 1e-9  # barycentric slack: a ray along a shared edge hits at least one side
+
+
+def _minus(a, b):
+    return [a[k] - b[k] for k in range(3)]
+
+
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _cross(a, b):
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 
 
 def intersect_ray_triangle(origin, direction, v0, v1, v2):
@@ -23,20 +35,27 @@ def intersect_ray_triangle(origin, direction, v0, v1, v2):
     caller takes the nearest. Only t > 0 counts. Values and gradients stay finite in
     every case.
 
+    Coordinates run along the first axis: (3,) vectors for one ray and one triangle,
+    or (3, ...) columns for many at once that broadcast against each other (rays
+    (3, P, R) against triangles (3, P, 1)); the results have the trailing shape. The
+    products are written per coordinate, so that many rays and triangles make one
+    elementwise loop on the CPU.
+
     **Returns:** (hit, t, u, v); t is +inf where there is no hit.
     """
-    e1, e2 = v1 - v0, v2 - v0
-    pvec = jnp.cross(direction, e2)
-    det = jnp.dot(e1, pvec)
+    e1, e2 = _minus(v1, v0), _minus(v2, v0)
+    pvec = _cross(direction, e2)
+    det = _dot(e1, pvec)
     # |det| = |d . (e1 x e2)|: compare with |d| |e1 x e2| to judge parallel rays.
-    scale = safe_norm(direction) * safe_norm(jnp.cross(e1, e2))
+    normal = _cross(e1, e2)
+    scale = safe_sqrt(_dot(direction, direction)) * safe_sqrt(_dot(normal, normal))
     parallel = jnp.abs(det) <= PARALLEL_TOLERANCE * scale
     inverse = safe_div(1.0, jnp.where(parallel, 0.0, det))
-    tvec = origin - v0
-    u = jnp.dot(tvec, pvec) * inverse
-    qvec = jnp.cross(tvec, e1)
-    v = jnp.dot(direction, qvec) * inverse
-    t = jnp.dot(e2, qvec) * inverse
+    tvec = _minus(origin, v0)
+    u = _dot(tvec, pvec) * inverse
+    qvec = _cross(tvec, e1)
+    v = _dot(direction, qvec) * inverse
+    t = _dot(e2, qvec) * inverse
     slack = EDGE_TOLERANCE
     hit = ~parallel & (u >= -slack) & (v >= -slack) & (u + v <= 1.0 + slack) & (t > 0.0)
     return hit, jnp.where(hit, t, jnp.inf), u, v
