@@ -6,7 +6,8 @@ taxel; sphere8 (8 cone taxels) pressed by a half-space, 64 rays. Unit-modulus
 Laplace field, float64. Poses sweep the probe across the sensor at a fixed depth.
 
 - culled: `calc_unit_response` (contact + culled taxel sampling + wrench) for a batch
-  of poses in one jitted call (vmap over chunks of 64, lax.map over chunks);
+  of poses in one jitted call (vmap over chunks of poses, lax.map over chunks: the
+  library's CPU_POSE_GROUP on a CPU, the whole batch on an accelerator);
 - brute force: the same with every ray of every taxel tested against every triangle
   of the contact surface's buffer; run on fewer frames (it is slow), frames/s are
   per frame and comparable;
@@ -26,11 +27,16 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 from _machine import describe_machine, time_over_poses, write_results  # noqa: E402
 
-from hydrotact.contact import HalfSpace, calc_contact_surface, compute_contact_surface, make_cylinder_probe, make_pose  # noqa: E402
+from hydrotact.contact import (  # noqa: E402
+    CPU_POSE_GROUP,
+    HalfSpace,
+    calc_contact_surface,
+    compute_contact_surface,
+    make_cylinder_probe,
+    make_pose,
+)
 from hydrotact.sim import SimCapacity, make_sensor_model  # noqa: E402
 from hydrotact.taxel import calc_taxel_pressures, sample_taxels  # noqa: E402
-
-CHUNK = 64
 
 
 def _poses(sensor, count):
@@ -42,7 +48,8 @@ def _poses(sensor, count):
 
 
 def _frames_per_second(frame, translations, repeats):
-    seconds, result = time_over_poses(frame, translations, CHUNK, repeats)
+    chunk = CPU_POSE_GROUP if jax.default_backend() == "cpu" else len(translations)
+    seconds, result = time_over_poses(frame, translations, chunk, repeats)
     return len(translations) / seconds, result
 
 
