@@ -65,6 +65,7 @@ from hydrotact.visco import calc_barometer_readings, calc_contact_response, make
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from pyvisco_reference import _import_pyvisco, fit_prony_pyvisco  # noqa: E402
+from sysid_synthetic import make_press_depths  # noqa: E402
 
 TRUE_LONG_TERM = 6e5
 TRUE_MODULI = np.array([2.5e5, 1.5e5, 1e5])
@@ -76,30 +77,12 @@ FORCE_NOISE = 5e-3  # N RMS
 # --- data ---------------------------------------------------------------------------
 
 
-def make_indentation(times, rng):
-    """Press / hold / release cycles: (T,) depth in m."""
-    depth = np.zeros_like(times)
-    start, ramp = 1.0, 0.3
-    span = times[-1]
-    while start < span - 2.0:
-        hold = rng.uniform(2.0, 40.0)
-        deepest = rng.uniform(0.3e-3, 0.8e-3)
-        up = (times >= start) & (times < start + ramp)
-        depth[up] = deepest * (times[up] - start) / ramp
-        held = (times >= start + ramp) & (times < start + ramp + hold)
-        depth[held] = deepest
-        down = (times >= start + ramp + hold) & (times < start + 2 * ramp + hold)
-        depth[down] = deepest * (1.0 - (times[down] - start - ramp - hold) / ramp)
-        start += 2 * ramp + hold + rng.uniform(2.0, 20.0)
-    return depth
-
-
 def make_log(minutes, rate, num_channels, seed):
     """The synthetic log, its unit responses and the truth."""
     rng = np.random.default_rng(seed)
     truth = make_prony(TRUE_LONG_TERM, TRUE_MODULI, TRUE_TAUS)
     times = np.arange(int(round(minutes * 60.0 * rate))) / rate
-    depth = make_indentation(times, rng)
+    depth = make_press_depths(rng, times, holds=(2.0, 40.0), gaps=(2.0, 20.0), ramp=0.3, start=1.0, end_margin=2.0)
     shape = rng.uniform(0.2, 1.0, num_channels) * 1e-3 / (0.5e-3) ** 1.5
     unit = depth[:, None] ** 1.5 * shape  # Pa per Pa of E
     unit_force = np.zeros((len(times), 3))
@@ -191,6 +174,12 @@ def _timed(fn, *args, **kwargs):
     return result, time.perf_counter() - start
 
 
+def _timed_median(repeats, fn, *args):
+    """fn(*args) run `repeats` times: (the last result, the median seconds)."""
+    runs = [_timed(fn, *args) for _ in range(repeats)]
+    return runs[-1][0], statistics.median(seconds for _, seconds in runs)
+
+
 def _material(x, num_terms):
     """(E_inf, [E_i], [tau_i]) from a flat x (tau ascending)."""
     moduli, taus = np.exp(x[1 : 1 + num_terms]), np.exp(x[1 + num_terms : 1 + 2 * num_terms])
@@ -254,10 +243,9 @@ def bench_log_fit(args, rows):
         # fit_problem may pass _run the problem without its host-side infos (so they
         # do not key the compilation cache): do the same to hit its compiled code.
         run_problem = problem.without_infos() if hasattr(problem, "without_infos") else problem
-        solve_seconds = []
-        for _ in range(args.log_repeats):
-            out, seconds = _timed(lambda: jax.block_until_ready(_run(run_problem, layout, jnp.asarray(x0), solver, bounds, 1e-10, 1e-10, 400)))
-            solve_seconds.append(seconds)
+        out, solve_seconds = _timed_median(
+            args.log_repeats, lambda: jax.block_until_ready(_run(run_problem, layout, jnp.asarray(x0), solver, bounds, 1e-10, 1e-10, 400))
+        )
         assert np.allclose(np.asarray(out[0]), second.x, rtol=0, atol=1e-12), "the timed solve differs from fit_problem's"
         # Compilation on its own (trace + lower + XLA compile, ahead of time): under load
         # first - second call is noisy, as both are dominated by the run.
@@ -273,7 +261,7 @@ def bench_log_fit(args, rows):
             "second_call_s": second_seconds,
             "compile_s": first_seconds - second_seconds,
             "compile_aot_s": aot_seconds,
-            "solve_s": statistics.median(solve_seconds),
+            "solve_s": solve_seconds,
             "initial_guess_s": init_seconds,
             "steps": second.num_steps,
             "converged": second.converged,
@@ -342,29 +330,23 @@ def bench_relaxation(args, rows):
     modulus = clean * (1.0 + 1e-3 * rng.standard_normal(times.size))
 
     _import_pyvisco()
-    pyvisco_seconds = []
-    for _ in range(args.repeats):
-        fit, seconds = _timed(fit_prony_pyvisco, times, modulus, args.terms)
-        pyvisco_seconds.append(seconds)
+    fit, pyvisco_seconds = _timed_median(args.repeats, fit_prony_pyvisco, times, modulus, args.terms)
     pyvisco = {
         "task": "relaxation curve",
         "method": "pyvisco (N-term fit_time, opt=True)",
-        "second_call_s": statistics.median(pyvisco_seconds),
+        "second_call_s": pyvisco_seconds,
         "residual_rms": fit["residual_rms"],
         "errors": _errors(fit["long_term_modulus"], fit["moduli"], fit["taus"]),
     }
 
     first, first_seconds = _timed(fit_relaxation_curve, times, modulus, args.terms)
-    ours_seconds = []
-    for _ in range(args.repeats):
-        ours, seconds = _timed(fit_relaxation_curve, times, modulus, args.terms)
-        ours_seconds.append(seconds)
+    ours, ours_seconds = _timed_median(args.repeats, fit_relaxation_curve, times, modulus, args.terms)
     hydrotact = {
         "task": "relaxation curve",
         "method": "hydrotact fit_relaxation_curve('lm')",
         "first_call_s": first_seconds,
-        "second_call_s": statistics.median(ours_seconds),
-        "compile_s": first_seconds - statistics.median(ours_seconds),
+        "second_call_s": ours_seconds,
+        "compile_s": first_seconds - ours_seconds,
         "converged": ours.converged,
         "residual_rms": ours.residual_rms,
         "errors": _errors(ours.long_term_modulus.value, np.array([m.value for m, _ in ours.terms]), np.array([t.value for _, t in ours.terms])),

@@ -22,12 +22,20 @@ DEPTH_SCALE = 0.5e-3  # m: the depth where a unit response reaches its `shape` v
 
 
 def make_depth_history(rng, duration: float, rate_hz: float, holds=(2.0, 30.0), gaps=(2.0, 15.0), ramp: float = 0.3):
-    """(times, depth) of press / hold / release cycles: 0.3-0.8 mm deep, linear
-    ramps of `ramp` s, hold and rest times drawn uniformly from `holds` and `gaps`."""
+    """(times, depth) of press / hold / release cycles (:func:`make_press_depths`)
+    sampled at `rate_hz` for `duration` s: the first press at min(1 s, duration / 10),
+    none starting within min(5 s, duration / 5) of the end."""
     times = np.arange(0.0, duration, 1.0 / rate_hz)
+    return times, make_press_depths(rng, times, holds, gaps, ramp, start=min(1.0, 0.1 * duration), end_margin=min(5.0, 0.2 * duration))
+
+
+def make_press_depths(rng, times, holds, gaps, ramp: float, start: float, end_margin: float):
+    """Depth (T,) in m at `times` of press / hold / release cycles: 0.3-0.8 mm deep,
+    linear ramps of `ramp` s, hold and rest times drawn uniformly from `holds` and
+    `gaps`, the first press at `start`, none starting within `end_margin` of the end.
+    (Also benchmarks/sysid.py's log.)"""
     depth = np.zeros_like(times)
-    start = min(1.0, 0.1 * duration)
-    while start < times[-1] - min(5.0, 0.2 * duration):
+    while start < times[-1] - end_margin:
         hold = rng.uniform(*holds)
         deepest = rng.uniform(0.3e-3, 0.8e-3)
         up = (times >= start) & (times < start + ramp)
@@ -37,7 +45,7 @@ def make_depth_history(rng, duration: float, rate_hz: float, holds=(2.0, 30.0), 
         down = (times >= start + ramp + hold) & (times < start + 2 * ramp + hold)
         depth[down] = deepest * (1.0 - (times[down] - start - ramp - hold) / ramp)
         start += 2 * ramp + hold + rng.uniform(*gaps)
-    return times, depth
+    return depth
 
 
 def _metadata(num_channels: int) -> dict:
