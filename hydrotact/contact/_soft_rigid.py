@@ -197,6 +197,8 @@ def calc_soft_rigid_surface(
         chosen, pair_valid, num_polygons = select(may_meet, capacity.polygons)
         chosen = jnp.maximum(chosen, 0)
         tet_index, tri_index = near_tets[i[chosen]], tris[j[chosen]]
+        # Gathered again from the small near lists: taking the chosen columns of the
+        # candidate tables instead ran 13 % slower on the CPU (benchmarks/RESULTS.md).
         pair_tets, pair_triangles = near_rows[i[chosen]].T, tri_rows[j[chosen]].T
         search_slots = num_cluster_slots * cluster_size
         needed = jnp.array(
