@@ -69,30 +69,42 @@ def run_demo(out_dir, progress: bool = True, smoke: bool = False) -> dict:
     summary (also out_dir/summary.json). `smoke`: two presses, two Prony terms
     (0.3 s, 3 s), 16 rays: the same job at test-suite size."""
     from ._fit_job import print_fit_table, run_fit
-    from ._simulate_job import run_simulate
-    from .data import make_material_document, read_log, write_material
+    from .data import make_material_document, material_prony, write_log, write_material
+    from .sim import BarometerSettings, make_trajectory, simulate_log
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    trajectory = out_dir / "demo_trajectory.csv"
-    np.savetxt(trajectory, make_demo_trajectory(SMOKE_PRESSES if smoke else PRESSES), delimiter=",", header="time,x,y,z", comments="", fmt="%.9g")
+    # The numbers of the trajectory file are the ones simulated (9 significant digits).
+    waypoints = np.array([[float(f"{value:.9g}") for value in row] for row in make_demo_trajectory(SMOKE_PRESSES if smoke else PRESSES)])
+    trajectory_path = out_dir / "demo_trajectory.csv"
+    write_text_atomic(trajectory_path, "time,x,y,z\n" + "".join(",".join(f"{value:.9g}" for value in row) + "\n" for row in waypoints))
     truth_numbers = dict(TRUTH)
     if smoke:
         truth_numbers.update(moduli=TRUTH["moduli"][:2], taus=TRUTH["taus"][:2])
-    truth_path = out_dir / "truth_material.json"
     truth = make_material_document(
         truth_numbers["long_term_modulus"], truth_numbers["moduli"], truth_numbers["taus"], name="demo truth",
         description="The material the demo log is simulated with.", provenance={"method": "simulation"},
     )
+    truth_path = out_dir / "truth_material.json"
     write_material(truth_path, truth)
-    log_path = out_dir / "demo_log.parquet"
-    simulated = run_simulate(
-        "pad5x5", "cylinder:d=2mm", trajectory, log_path, material=truth_path, barometer=True, seed=1, noise_rms=0.5,
-        gain_spread=0.05, offset_spread=30.0, force_noise=0.005, num_rays=16 if smoke else 32, png=out_dir / "demo_log.png", progress=progress,
+    barometer = BarometerSettings(seed=1, noise_rms=0.5, gain_spread=0.05, offset_spread=30.0, force_noise=0.005)
+    probe = "cylinder:d=2mm"
+    log, samples = simulate_log(
+        "pad5x5", probe, make_trajectory(waypoints[:, 0], waypoints[:, 1:4], source=str(trajectory_path)), material_prony(truth, "demo truth"),
+        num_rays=16 if smoke else 32, barometer=barometer, progress=progress,
     )
+    log_path = out_dir / "demo_log.parquet"
+    write_log(log_path, log)
+    from .viz import plot_log
+
+    plot_log(log, out_dir / "demo_log.png", title=f"pad5x5: {probe}, E(0) = {float(samples.modulus):g} Pa")
+    simulated = {
+        "sensor": "pad5x5", "probe": probe, "num_samples": log.num_samples, "num_taxels": len(log.metadata["channels"]),
+        "samples_in_contact": int(np.sum(samples.contact)), "max_normal_force_N": float(np.max(samples.normal_force, initial=0.0)),
+        "max_taxel_pressure_Pa": float(np.max(samples.taxel_pressures, initial=0.0)), "log": str(log_path), "png": str(out_dir / "demo_log.png"),
+    }
     report = run_fit([log_path], out_dir / "fit", terms=2 if smoke else "auto", progress=progress)
-    log_metadata = read_log(log_path).metadata
-    gains = {f"pad5x5/{name}": g for name, g in zip(log_metadata["channels"], log_metadata["barometer"]["gains"])}
+    gains = {f"pad5x5/{name}": g for name, g in zip(log.metadata["channels"], log.metadata["barometer"]["gains"])}
     truth_numbers = {**truth_numbers, "instantaneous_modulus": truth_numbers["long_term_modulus"] + sum(truth_numbers["moduli"]), "gains": gains}
     print_fit_table(report, truth_numbers)
     summary = {
@@ -100,8 +112,7 @@ def run_demo(out_dir, progress: bool = True, smoke: bool = False) -> dict:
         "fit": {key: report[key] for key in ("num_terms", "long_term_modulus_Pa", "prony_terms", "instantaneous_modulus_Pa", "reduced_chi_square", "converged", "seconds")},
         "criterion": report.get("criterion"),
         "simulation": simulated,
-        "files": {"trajectory": str(trajectory), "truth_material": str(truth_path), "log": str(log_path), "log_png": str(out_dir / "demo_log.png"), **report["files"]},
+        "files": {"trajectory": str(trajectory_path), "truth_material": str(truth_path), "log": str(log_path), "log_png": str(out_dir / "demo_log.png"), **report["files"]},
     }
     write_text_atomic(out_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
     return summary
-

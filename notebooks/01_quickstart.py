@@ -37,8 +37,9 @@ from IPython.display import Image, display
 
 from hydrotact.contact import compute_contact_surface, make_cylinder_probe, make_pose
 from hydrotact.sensors import load_sensor
-from hydrotact.sim import make_material, make_sensor_model, make_trajectory, simulate
+from hydrotact.sim import make_sensor_model, make_trajectory, simulate
 from hydrotact.taxel import sample_taxels
+from hydrotact.visco import make_prony
 
 SMOKE = os.environ.get("HYDROTACT_SMOKE") == "1"
 OUT = os.environ.get("HYDROTACT_NOTEBOOK_OUT", "quickstart_out")
@@ -122,7 +123,7 @@ num_samples = 6 if SMOKE else 60
 times = np.arange(num_samples) * 0.01
 x = np.linspace(-3e-3, 3e-3, num_samples)
 trajectory = make_trajectory(times, np.column_stack([x, np.zeros_like(x), np.full_like(x, 4e-3 - 0.45e-3)]))
-samples = simulate(model, make_material(modulus), probe, trajectory)
+samples = simulate(model, make_prony(modulus), probe, trajectory)  # an elastic material: no Prony terms
 
 figure, (top, bottom) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
 for k in (11, 12, 13):

@@ -106,7 +106,7 @@ print(f"{len(waypoints)} waypoints, {waypoints[-1, 0]:.1f} s")
 # ($\tau_1$ = 0.3 s) and a slow one ($\tau_2$ = 3 s). It is written as a material
 # document (`data_schemas/material.schema.json`), the same format the fit writes.
 #
-# `run_simulate` is what `hydrotact simulate --material truth.json --barometer` runs:
+# `simulate_log` is what `hydrotact simulate --material truth.json --barometer` runs, without files:
 # it simulates the unit-modulus taxel pressures and contact force at every distinct
 # probe pose, convolves them with the material's relaxation (the hereditary integral),
 # and turns the elastomer pressures into what a BMP388 would log: ambient pressure plus
@@ -114,23 +114,21 @@ print(f"{len(waypoints)} waypoints, {waypoints[-1, 0]:.1f} s")
 # load cell under the pad logs the force (with 5 mN of noise).
 
 # %%
-from hydrotact._simulate_job import run_simulate
-from hydrotact.data import make_material_document, read_log, write_material
+from hydrotact.data import make_material_document, material_prony, read_log, write_log, write_material
+from hydrotact.sim import BarometerSettings, read_trajectory, simulate_log
 
 TRUTH = {"long_term_modulus": 6.0e5, "moduli": [2.5e5, 1.5e5], "taus": [0.3, 3.0]}
 truth_json = OUT / "truth_material.json"
-write_material(
-    truth_json,
-    make_material_document(TRUTH["long_term_modulus"], TRUTH["moduli"], TRUTH["taus"], name="notebook truth", provenance={"method": "simulation"}),
-)
+truth = make_material_document(TRUTH["long_term_modulus"], TRUTH["moduli"], TRUTH["taus"], name="notebook truth", provenance={"method": "simulation"})
+write_material(truth_json, truth)
 NUM_RAYS = 16 if SMOKE else 32
-log_path = OUT / "recording.parquet"
-simulated = run_simulate(
-    "pad5x5", "cylinder:d=2mm", trajectory_csv, log_path, material=truth_json, barometer=True, seed=1,
-    noise_rms=0.5, gain_spread=0.05, offset_spread=30.0, force_noise=0.005, num_rays=NUM_RAYS, progress=False,
+log, samples = simulate_log(
+    "pad5x5", "cylinder:d=2mm", read_trajectory(trajectory_csv), material_prony(truth), num_rays=NUM_RAYS,
+    barometer=BarometerSettings(seed=1, noise_rms=0.5, gain_spread=0.05, offset_spread=30.0, force_noise=0.005),
 )
-log = read_log(log_path)
-print(json.dumps(simulated, indent=1))
+log_path = OUT / "recording.parquet"
+write_log(log_path, log)  # the log as a file, as a rig would leave it
+print(f"{log.num_samples} samples, {int(samples.contact.sum())} in contact, max normal force {samples.normal_force.max():.3f} N")
 print("columns:", ", ".join(log.columns))
 true_gains = dict(zip(log.metadata["channels"], log.metadata["barometer"]["gains"]))
 

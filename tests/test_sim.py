@@ -9,11 +9,11 @@ import pytest
 
 from hydrotact._errors import HydrotactError
 from hydrotact.contact import Capacity, HalfSpace, compute_contact_surface, make_cylinder_probe, make_pose, make_sphere_probe
+from hydrotact.visco import make_prony
 from hydrotact.sim import (
     SimCapacity,
     calc_contact_angles,
     calc_simulation,
-    make_material,
     make_sensor_model,
     make_trajectory,
     simulate,
@@ -42,8 +42,8 @@ def _pad_trajectory():
 def test_response_is_linear_in_modulus_and_matches_the_contact_stage(pad_model):
     probe = make_cylinder_probe(2e-3)
     trajectory = _pad_trajectory()
-    soft = simulate(pad_model, make_material(1e6), probe, trajectory)
-    stiff = simulate(pad_model, make_material(3e6), probe, trajectory)
+    soft = simulate(pad_model, make_prony(1e6), probe, trajectory)
+    stiff = simulate(pad_model, make_prony(3e6), probe, trajectory)
     np.testing.assert_allclose(stiff.taxel_pressures, 3 * soft.taxel_pressures, rtol=1e-12, atol=1e-9)
     np.testing.assert_allclose(stiff.force_S, 3 * soft.force_S, rtol=1e-12, atol=1e-15)
     field = eqx.tree_at(lambda f: f.modulus, pad_model.field, jnp.asarray(1e6))
@@ -62,7 +62,7 @@ def test_response_is_linear_in_modulus_and_matches_the_contact_stage(pad_model):
 
 def test_normal_force_of_a_flat_press_is_minus_fz(pad_model):
     trajectory = make_trajectory([0.0, 0.01], [[0.0, 0.0, PAD_TOP - 0.2e-3], [0.0, 0.0, PAD_TOP - 0.4e-3]])
-    samples = simulate(pad_model, make_material(2e5), HalfSpace(), trajectory)
+    samples = simulate(pad_model, make_prony(2e5), HalfSpace(), trajectory)
     np.testing.assert_allclose(samples.normal_force, -samples.force_S[:, 2], rtol=1e-9)
     np.testing.assert_allclose(samples.force_S[:, :2], 0.0, atol=1e-9 * np.abs(samples.force_S[:, 2]).max())
     # a half-space covers every taxel's field: all 25 read, symmetric about x = y up to
@@ -94,7 +94,7 @@ def test_radial_press_on_the_sphere_recovers_its_angles_and_normal(sphere_model,
     angle = np.arccos(np.clip(n[2], -1, 1))
     rotation = axis / np.linalg.norm(axis) * angle if np.linalg.norm(axis) > 0 else np.zeros(3)
     trajectory = make_trajectory([0.0], [tip], [rotation])
-    samples = simulate(sphere_model, make_material(5e6), make_sphere_probe(probe_radius), trajectory)
+    samples = simulate(sphere_model, make_prony(5e6), make_sphere_probe(probe_radius), trajectory)
     assert samples.contact[0]
     assert samples.theta[0] == pytest.approx(theta, abs=0.03)
     assert samples.phi[0] == pytest.approx(phi, abs=0.03)
@@ -107,10 +107,10 @@ def test_buffers_grow_until_nothing_overflows(pad_model):
     probe = make_cylinder_probe(2e-3)
     trajectory = _pad_trajectory()
     tiny = SimCapacity(contact=Capacity(16, 16, 32, 32), taxel_pairs=16)
-    grown = simulate(pad_model, make_material(1e6), probe, trajectory, capacity=tiny)
-    reference = simulate(pad_model, make_material(1e6), probe, trajectory)
+    grown = simulate(pad_model, make_prony(1e6), probe, trajectory, capacity=tiny)
+    reference = simulate(pad_model, make_prony(1e6), probe, trajectory)
     np.testing.assert_allclose(grown.taxel_pressures, reference.taxel_pressures, rtol=1e-13, atol=1e-9)
-    pure = eqx.filter_jit(calc_simulation)(pad_model, make_material(1e6), probe, trajectory, tiny)
+    pure = eqx.filter_jit(calc_simulation)(pad_model, make_prony(1e6), probe, trajectory, tiny)
     assert bool(np.any(pure.unit.overflow))  # the pure call reports, never hides, overflow
 
 
@@ -120,16 +120,16 @@ def test_simulation_vmaps_over_trajectories(pad_model):
     _, contact = compute_contact_surface(pad_model.field, probe, jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), first.X_SR, second.X_SR))
     capacity = SimCapacity(contact=contact, taxel_pairs=1 << 13)
     both = jax.tree_util.tree_map(lambda a, b: jnp.stack([a, b]), first, second)
-    batched = eqx.filter_jit(eqx.filter_vmap(calc_simulation, in_axes=(None, None, None, 0, None)))(pad_model, make_material(1e6), probe, both, capacity)
+    batched = eqx.filter_jit(eqx.filter_vmap(calc_simulation, in_axes=(None, None, None, 0, None)))(pad_model, make_prony(1e6), probe, both, capacity)
     for k, trajectory in enumerate((first, second)):
-        one = simulate(pad_model, make_material(1e6), probe, trajectory)
+        one = simulate(pad_model, make_prony(1e6), probe, trajectory)
         np.testing.assert_allclose(batched.taxel_pressures[k], one.taxel_pressures, rtol=1e-12, atol=1e-9)
         np.testing.assert_allclose(batched.normal_force[k], one.normal_force, rtol=1e-12, atol=1e-15)
 
 
 def test_bad_material_and_trajectory_are_refused():
     with pytest.raises(HydrotactError, match="positive pressure"):
-        make_material(-1.0)
+        make_prony(-1.0)  # the material: an elastic one is a Prony series with no terms
     with pytest.raises(HydrotactError, match="row 3: time 0.01 s does not increase"):
         make_trajectory([0.0, 0.01, 0.01], np.zeros((3, 3)))
     with pytest.raises(HydrotactError, match="row 2: position is not a finite number"):

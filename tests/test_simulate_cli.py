@@ -13,6 +13,7 @@ import pytest
 from helpers import assert_one_line_error, run_cli
 
 import hydrotact._simulate_job as job
+import hydrotact.sim._host as host
 from hydrotact import HydrotactError
 from hydrotact.cli import main
 from hydrotact.data import read_log
@@ -51,8 +52,11 @@ def _in_metres(rows):
 
 
 @pytest.fixture(autouse=True)
-def _small_blocks(monkeypatch):
-    monkeypatch.setattr(job, "BLOCK", BLOCK_SAMPLES)
+def _small_blocks_own_cache(monkeypatch, tmp_path_factory):
+    """Blocks of BLOCK_SAMPLES poses, and a cache of unit responses of this test's own
+    (else a run would find the reference's responses there and compute nothing)."""
+    monkeypatch.setattr(host, "BLOCK", BLOCK_SAMPLES)
+    monkeypatch.setenv("HYDROTACT_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
 
 
 @pytest.fixture(scope="module")
@@ -61,7 +65,8 @@ def reference(tmp_path_factory):
     folder = tmp_path_factory.mktemp("reference")
     trajectory = _write_trajectory(folder / "traj.csv", _in_metres(TRAJECTORY_MM).tolist())
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(job, "BLOCK", BLOCK_SAMPLES)
+        patch.setattr(host, "BLOCK", BLOCK_SAMPLES)
+        patch.setenv("HYDROTACT_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
         job.run_simulate("pad5x5", PROBE, trajectory, folder / "log.parquet", modulus=1e6, num_rays=RAYS, progress=False)
     return read_log(folder / "log.parquet")
 
@@ -73,7 +78,7 @@ class _Counting:
     def __init__(self, fail_on=None):
         self.calls = 0
         self.fail_on = fail_on
-        self.real = job.compute_unit_responses
+        self.real = host.compute_unit_responses
 
     def __call__(self, *args, **kwargs):
         self.calls += 1
@@ -183,7 +188,7 @@ BAD_INPUTS = [
 @pytest.mark.parametrize(("text", "extra", "fragments"), [case[1:] for case in BAD_INPUTS], ids=[case[0] for case in BAD_INPUTS])
 def test_bad_inputs(tmp_path, capsys, monkeypatch, text, extra, fragments):
     counting = _Counting()
-    monkeypatch.setattr(job, "compute_unit_responses", counting)
+    monkeypatch.setattr(host, "compute_unit_responses", counting)
     trajectory = tmp_path / "traj.csv"
     if isinstance(text, bytes):
         trajectory.write_bytes(text)
@@ -244,7 +249,7 @@ def _partial(output):
 
 
 def _run(trajectory, output, monkeypatch, counting):
-    monkeypatch.setattr(job, "compute_unit_responses", counting)
+    monkeypatch.setattr(host, "compute_unit_responses", counting)
     return job.run_simulate("pad5x5", PROBE, trajectory, output, modulus=1e6, num_rays=RAYS, progress=False)
 
 
@@ -329,7 +334,7 @@ def test_partial_file_of_another_block_size_is_used_correctly(tmp_path, monkeypa
     interrupted = _Counting(fail_on=3)
     with pytest.raises(KeyboardInterrupt):
         _run(trajectory, output, monkeypatch, interrupted)  # blocks 0-2 and 3-5 saved
-    monkeypatch.setattr(job, "BLOCK", 2 * BLOCK_SAMPLES)
+    monkeypatch.setattr(host, "BLOCK", 2 * BLOCK_SAMPLES)
     resumed = _Counting()
     _run(trajectory, output, monkeypatch, resumed)
     _assert_same_log(read_log(output), reference)

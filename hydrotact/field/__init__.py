@@ -15,3 +15,4 @@ from ._solve import (
     make_laplace_problem as make_laplace_problem,
     solve_strain as solve_strain,
 )
+from ._kinds import StrainFieldKind as StrainFieldKind

@@ -1,12 +1,27 @@
-"""The end-to-end forward model: sensor + material + probe trajectory -> what each
-barometer reads, the contact wrench and the contact labels."""
+"""The forward model: sensor layout + material + probe trajectory -> what each
+barometer reports, the contact wrench and the contact labels.
 
-from ._model import (
-    Material as Material,
-    SensorModel as SensorModel,
-    make_material as make_material,
-    make_sensor_model as make_sensor_model,
+`calc_simulation` is the one pure function (jit, vmap over trajectories, grad with
+respect to poses, material, layout and barometer); `simulate` its host entry (chunks,
+buffer growth, progress, cache, resumable runs); `simulate_log` the same as a
+`hydrotact.data.BarometerLog`, without files.
+"""
+
+from ._host import (
+    BLOCK as BLOCK,
+    calc_responses_key as calc_responses_key,
+    compute_pose_responses as compute_pose_responses,
+    compute_trajectory_responses as compute_trajectory_responses,
+    compute_unit_responses as compute_unit_responses,
+    simulate as simulate,
 )
+from ._log import (
+    BarometerSettings as BarometerSettings,
+    make_barometer_log as make_barometer_log,
+    material_metadata as material_metadata,
+    simulate_log as simulate_log,
+)
+from ._model import SensorModel as SensorModel, make_sensor_model as make_sensor_model
 from ._simulate import (
     CONTACT_THRESHOLD_N as CONTACT_THRESHOLD_N,
     Samples as Samples,
@@ -16,10 +31,11 @@ from ._simulate import (
     calc_samples as calc_samples,
     calc_simulation as calc_simulation,
     calc_unit_response as calc_unit_response,
-    calc_viscoelastic_samples as calc_viscoelastic_samples,
-    compute_unit_responses as compute_unit_responses,
-    grown_sim_capacity as grown_sim_capacity,
-    scale_unit_responses as scale_unit_responses,
-    simulate as simulate,
 )
-from ._trajectory import Trajectory as Trajectory, make_trajectory as make_trajectory, read_trajectory as read_trajectory
+from ._trajectory import (
+    Trajectory as Trajectory,
+    find_distinct_poses as find_distinct_poses,
+    make_trajectory as make_trajectory,
+    read_trajectory as read_trajectory,
+    resample_trajectory as resample_trajectory,
+)

@@ -1,5 +1,13 @@
 """The device-side model of a sensor: its unit-modulus pressure field, tet clusters
-for the contact search, and its taxel layout; and the material that scales it."""
+for the contact search, and its taxel layout.
+
+The material is not part of the model: it is a `visco.Prony` (an elastic material is
+one with no terms), and the model's field has unit modulus, so every response it gives
+is per pascal of E and the material acts on it (the elastic response is linear in E).
+"""
+
+import json
+import os
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -8,10 +16,8 @@ import numpy as np
 from .._errors import HydrotactError
 from .._types import Array, Float
 from ..contact import TetClusters, make_tet_clusters
-from ..field import PressureField, calc_distance_field, make_laplace_problem, make_pressure_field, solve_strain
+from ..field import PressureField, StrainFieldKind, calc_distance_field, make_laplace_problem, make_pressure_field, solve_strain
 from ..taxel import TaxelLayout, make_taxel_layout
-
-FIELD_KINDS = ("laplace", "distance")
 
 
 class SensorModel(eqx.Module):
@@ -48,37 +54,39 @@ class SensorModel(eqx.Module):
         return bool(np.all(np.isfinite(np.asarray(self.contact_center_S))))
 
 
-class Material(eqx.Module):
-    """The elastomer's hydroelastic modulus E in Pa (elastic; the viscoelastic stage
-    relaxes it in time with Prony terms)."""
-
-    modulus: Float[Array, ""]
-
-
-def make_material(modulus) -> Material:
-    modulus = float(modulus)
-    if not np.isfinite(modulus) or modulus <= 0.0:
-        raise HydrotactError(f"the modulus must be a positive pressure in Pa, got {modulus!r}")
-    return Material(jnp.asarray(modulus))
-
-
-def make_sensor_model(spec, field_kind: str = "laplace", num_rays: int = 64, mesh=None) -> SensorModel:
+def make_sensor_model(spec, field_kind: StrainFieldKind | str = StrainFieldKind.LAPLACE, num_rays: int = 64, mesh=None) -> SensorModel:
     """Mesh the sensor of a :class:`hydrotact.sensors.SensorSpec` (or a built-in name or
     a spec file), solve its unit strain field and lay out its taxels (host).
 
-    `field_kind` is "laplace" (the physical field) or "distance" (Drake's, for
-    comparisons); `mesh` overrides the spec's geometry (e.g. a finer mesh).
+    `field_kind` is a StrainFieldKind (or its name): "laplace" (the physical field)
+    or "distance" (Drake's, for comparisons); `mesh` overrides the spec's geometry (e.g. a finer mesh).
     """
     from ..sensors import SensorSpec, load_sensor
 
     if not isinstance(spec, SensorSpec):
         spec = load_sensor(spec)
-    if field_kind not in FIELD_KINDS:
-        raise HydrotactError(f"unknown field kind {field_kind!r}; use one of {FIELD_KINDS}")
+    field_kind = StrainFieldKind.parse(field_kind, "field kind")
     if num_rays < 1:
         raise HydrotactError(f"num_rays must be at least 1, got {num_rays}")
+    if mesh is not None:
+        return _make_sensor_model(spec, field_kind, int(num_rays), mesh)
+    # Models are immutable: one per (spec, field, rays) serves every simulation and fit
+    # of a session (building one meshes the elastomer and solves its field). A surface
+    # file's modification time is part of the key: an edited file is meshed again.
+    path = spec.geometry.path
+    stamp = os.stat(path).st_mtime_ns if path is not None and os.path.exists(path) else None
+    key = (json.dumps(spec.to_json(), sort_keys=True), stamp, str(field_kind), int(num_rays))
+    if key not in _MODELS:
+        _MODELS[key] = _make_sensor_model(spec, field_kind, int(num_rays), None)
+    return _MODELS[key]
+
+
+_MODELS: dict = {}
+
+
+def _make_sensor_model(spec, field_kind, num_rays: int, mesh) -> SensorModel:
     mesh = spec.make_mesh() if mesh is None else mesh
-    if field_kind == "laplace":
+    if field_kind == StrainFieldKind.LAPLACE:
         strain = solve_strain(make_laplace_problem(mesh, source=spec.name)).strain
     else:
         strain = jnp.asarray(calc_distance_field(mesh, source=spec.name))

@@ -1,9 +1,14 @@
-"""The end-to-end forward model: probe poses -> taxel pressures, wrench and labels.
+"""The one forward model: sensor layout, material, probe and trajectory -> what the
+barometers report, the contact wrench and the labels (pure).
 
 Per sample: the contact surface of the probe and the elastomer (unit modulus), what
 each taxel reads of it, the wrench on the sensor, the contact normal and location.
 Everything but the contact flag is linear in E or independent of it, so the unit
-response is computed once per trajectory and the material only scales it.
+response is computed once per pose and the material acts on it: a Prony relaxation
+modulus through the hereditary integral (an elastic material is a Prony series with no
+terms), a contact pushing but never pulling (visco.calc_contact_response). Optionally
+the barometer signal follows: ambient, per-channel gain and offset, drift, noise from a
+PRNG key, quantisation to the part's LSB (visco.calc_barometer_readings).
 
 Conventions (frame S, the sensor base frame: PCB on z = 0, +z the pad normal):
 
@@ -22,14 +27,13 @@ Conventions (frame S, the sensor base frame: PCB on z = 0, +z the pad normal):
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from .._math import safe_div, safe_norm
 from .._types import Array, Bool, Float, Int
 from ..contact import Capacity, Pose, calc_contact_surface, map_over_poses
-from ..contact._api import grown_contact_capacity
-from ..taxel import calc_taxel_pressures, grown_capacity
-from ._model import Material, SensorModel
+from ..taxel import calc_taxel_pressures
+from ..visco import BarometerSignal, Prony, calc_barometer_readings, calc_contact_response
+from ._model import SensorModel
 from ._trajectory import Trajectory
 
 CONTACT_THRESHOLD_N = 0.1
@@ -65,16 +69,19 @@ class UnitResponse(eqx.Module):
 class Samples(eqx.Module):
     """Simulated samples along a trajectory (arrays with a leading sample axis).
 
-    **Fields:** `times` (T,) s; `unit` the UnitResponse per sample; `modulus` E, Pa;
-    `taxel_pressures` (T, num_taxels) Pa; `force_S`, `torque_S` (T, 3) N, N m;
-    `normal_force` (T,) N; `theta`, `phi` (T,) rad (NaN where undefined);
-    `contact` (T,) bool.
+    **Fields:** `times` (T,) s; `unit` the UnitResponse per sample; `modulus` the
+    material's instantaneous modulus E(0), Pa; `taxel_pressures` (T, num_taxels) Pa,
+    the elastomer pressure at each barometer; `readings` (T, num_taxels) the
+    barometers' absolute readings, Pa, or None when simulated without a barometer
+    signal; `force_S`, `torque_S` (T, 3) N, N m; `normal_force` (T,) N; `theta`,
+    `phi` (T,) rad (NaN where undefined); `contact` (T,) bool.
     """
 
     times: Float[Array, " num_samples"]
     unit: UnitResponse
     modulus: Float[Array, ""]
     taxel_pressures: Float[Array, "num_samples num_taxels"]
+    readings: Float[Array, "num_samples num_taxels"] | None
     force_S: Float[Array, "num_samples 3"]
     torque_S: Float[Array, "num_samples 3"]
     normal_force: Float[Array, " num_samples"]
@@ -125,115 +132,76 @@ def calc_contact_angles(contact_point_S, contact_center_S):
     return theta, phi
 
 
-def calc_samples(model: SensorModel, material: Material, times, unit: UnitResponse) -> Samples:
-    """Scale unit responses (batched over samples) by the material and derive the
-    labels (pure)."""
-    modulus = material.modulus
-    return _labelled_samples(model, times, unit, modulus, modulus * unit.taxel_pressures, modulus * unit.force_S, modulus * unit.torque_S)
+def calc_samples(model: SensorModel, material: Prony, times, unit: UnitResponse, barometer: BarometerSignal | None = None, key=None) -> Samples:
+    """What the sensor reports for unit responses along a trajectory (pure).
 
+    Taxel pressures, force and torque are the hereditary integrals of their unit
+    responses with the material's relaxation modulus E(t) (the correspondence
+    principle; for a material without Prony terms simply E times the unit response),
+    a contact pushing but never pulling (visco.calc_contact_response). With
+    `barometer`, the taxel pressures are also turned into absolute readings at the
+    sample times (noise from `key` when given, none without).
 
-def calc_viscoelastic_samples(model: SensorModel, prony, times, unit: UnitResponse) -> Samples:
-    """Samples of a viscoelastic material (pure): taxel pressures, force and torque are
-    the hereditary integrals of their unit responses with the Prony modulus E(t)
-    (correspondence principle), a contact pushing but never pulling
-    (visco.calc_contact_response); `modulus` is reported as E(0)."""
-    from ..visco import calc_contact_response
+    **Arguments:** `times` (T,) s, strictly increasing; `unit` a UnitResponse with a
+    leading sample axis T; the rest as :func:`calc_simulation`.
 
+    **Returns:** Samples.
+    """
     stacked = jnp.concatenate([unit.taxel_pressures, unit.force_S, unit.torque_S], axis=1)
-    relaxed = calc_contact_response(prony, times, stacked)
+    relaxed = calc_contact_response(material, times, stacked)
     count = unit.taxel_pressures.shape[1]
-    return _labelled_samples(model, times, unit, prony.instantaneous_modulus, relaxed[:, :count], relaxed[:, count : count + 3], relaxed[:, count + 3 :])
-
-
-def _labelled_samples(model, times, unit, modulus, taxel_pressures, force, torque) -> Samples:
+    taxel_pressures, force, torque = relaxed[:, :count], relaxed[:, count : count + 3], relaxed[:, count + 3 :]
+    readings = None if barometer is None else calc_barometer_readings(barometer, times, taxel_pressures, key=key)
     magnitude = safe_norm(force)
-    in_contact = magnitude > CONTACT_THRESHOLD_N
     theta, phi = calc_contact_angles(unit.contact_point_S, model.contact_center_S[None])
     defined = (unit.area > 0.0) & jnp.all(jnp.isfinite(model.contact_center_S))
     return Samples(
         times=times,
         unit=unit,
-        modulus=modulus,
+        modulus=material.instantaneous_modulus,
         taxel_pressures=taxel_pressures,
+        readings=readings,
         force_S=force,
         torque_S=torque,
         normal_force=jnp.sum(force * unit.normal_S, axis=-1),
         theta=jnp.where(defined, theta, jnp.nan),
         phi=jnp.where(defined, phi, jnp.nan),
-        contact=in_contact,
+        contact=magnitude > CONTACT_THRESHOLD_N,
     )
 
 
-def calc_simulation(model: SensorModel, material: Material, probe, trajectory: Trajectory, capacity: SimCapacity = SimCapacity()) -> Samples:
-    """Simulate a whole trajectory in one pure call (vmap over samples): for jit,
-    grad and vmap over trajectories. Check `.unit.overflow`, or use :func:`simulate`."""
-    unit = jax.vmap(calc_unit_response, in_axes=(None, None, 0, None))(model, probe, trajectory.X_SR, capacity)
-    return calc_samples(model, material, trajectory.times, unit)
+def calc_simulation(
+    model: SensorModel,
+    material: Prony,
+    probe,
+    trajectory: Trajectory,
+    capacity: SimCapacity = SimCapacity(),
+    barometer: BarometerSignal | None = None,
+    key=None,
+) -> Samples:
+    """Simulate the sensor along a whole trajectory in one pure call.
 
+    Jittable, vmappable over trajectories (of one length) and differentiable with
+    respect to the trajectory's translations and rotation vectors, every material
+    parameter (E∞, Eᵢ, τᵢ), the model's field and taxel layout (positions, axes,
+    receptive-field sizes) and the barometer's gains, offsets and drifts. Quantisation
+    passes gradients straight through; the contact flag has none.
 
-@eqx.filter_jit
-def _chunk_response(model, probe, X_SR, capacity):
-    return map_over_poses(lambda X: calc_unit_response(model, probe, X, capacity), X_SR)
+    **Arguments:**
 
+    - `model`: the SensorModel (unit-modulus field, clusters, taxel layout).
+    - `material`: a visco.Prony; an elastic material is one with no terms
+      (`visco.make_prony(E)`).
+    - `probe`: the rigid probe (or half-space) pressed into the sensor.
+    - `trajectory`: times and probe poses X_SR; the samples are read at its times
+      (:func:`hydrotact.sim.resample_trajectory` puts it at a part's rate).
+    - `capacity`: buffer sizes (static). A buffer that overflows is flagged in
+      `.unit.overflow`, never truncated silently: check it, or use
+      :func:`hydrotact.sim.simulate`, which grows the buffers and recomputes.
+    - `barometer`, `key`: the barometer signal model and the PRNG key of its noise
+      (no readings without `barometer`, no noise without `key`).
 
-def grown_sim_capacity(capacity: SimCapacity, unit: UnitResponse) -> SimCapacity:
-    """A capacity that holds what the overflowing samples of `unit` needed (host)."""
-    contact, taxel_pairs = capacity.contact, capacity.taxel_pairs
-    contact_overflow, taxel_overflow = np.asarray(unit.contact_overflow), np.asarray(unit.taxel_overflow)
-    if contact_overflow.any():
-        contact = grown_contact_capacity(contact, np.asarray(unit.contact_needed)[contact_overflow])
-    if taxel_overflow.any():
-        taxel_pairs = grown_capacity(taxel_pairs, np.asarray(unit.taxel_needed)[taxel_overflow])
-    return SimCapacity(contact=contact, taxel_pairs=taxel_pairs)
-
-
-def compute_unit_responses(model: SensorModel, probe, X_SR: Pose, capacity: SimCapacity | None = None, chunk: int = 128, progress: bool = False):
-    """Unit responses for a batch of poses, in jitted chunks of `chunk` poses, growing
-    buffers (and recomputing the chunk) whenever one overflows (host).
-
-    **Returns:** (UnitResponse with a leading sample axis, as NumPy arrays; the
-    capacity that sufficed).
+    **Returns:** Samples (leading axis: the trajectory's samples).
     """
-    capacity = capacity or SimCapacity()
-    count = X_SR.translation.shape[0]
-    chunk = max(1, min(chunk, count))
-    pieces = []
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=count, unit="sample", desc=f"simulating {model.name}", leave=False)
-    for start in range(0, count, chunk):
-        index = np.minimum(np.arange(start, start + chunk), count - 1)  # pad the last chunk
-        poses = jax.tree_util.tree_map(lambda a: a[index], X_SR)
-        while True:
-            unit = _chunk_response(model, probe, poses, capacity)
-            if not bool(np.any(np.asarray(unit.overflow))):
-                break
-            capacity = grown_sim_capacity(capacity, unit)
-        used = min(chunk, count - start)
-        pieces.append(jax.tree_util.tree_map(lambda a: np.asarray(a)[:used], unit))
-        if bar is not None:
-            bar.update(used)
-    if bar is not None:
-        bar.close()
-    unit = jax.tree_util.tree_map(lambda *parts: np.concatenate(parts), *pieces)
-    return unit, capacity
-
-
-def simulate(model: SensorModel, material: Material, probe, trajectory: Trajectory, capacity: SimCapacity | None = None, progress: bool = False) -> Samples:
-    """Simulate the sensor along a probe trajectory (host entry point: chunks,
-    buffer growth, optional progress bar). **Returns:** Samples (NumPy-backed)."""
-    unit, _ = compute_unit_responses(model, probe, trajectory.X_SR, capacity, progress=progress)
-    return scale_unit_responses(model, material, trajectory.times, unit)
-
-
-def scale_unit_responses(model: SensorModel, material, times, unit: UnitResponse) -> Samples:
-    """:func:`calc_samples` (a Material) or :func:`calc_viscoelastic_samples` (a
-    visco.Prony) on host (NumPy) unit responses; **Returns:** NumPy-backed Samples."""
-    unit = jax.tree_util.tree_map(jnp.asarray, unit)
-    if isinstance(material, Material):
-        samples = calc_samples(model, material, jnp.asarray(times), unit)
-    else:
-        samples = calc_viscoelastic_samples(model, material, jnp.asarray(times), unit)
-    return jax.tree_util.tree_map(np.asarray, samples)
+    unit = map_over_poses(lambda X: calc_unit_response(model, probe, X, capacity), trajectory.X_SR)
+    return calc_samples(model, material, trajectory.times, unit, barometer, key)

@@ -18,18 +18,33 @@ ROTATION_COLUMNS = ("rx", "ry", "rz")
 
 
 class Trajectory(eqx.Module):
-    """A probe trajectory: at time `times[k]` (s) the probe frame R sits at pose
-    `X_SR[k]` in the sensor frame S (a batched Pose: rotation (T, 3, 3), translation
-    (T, 3) in metres), made from the rotation vectors `rotation_vectors` (T, 3), rad.
-    Built-in probes have their tip at R's origin."""
+    """A probe trajectory: at time `times[k]` (s) the probe frame R sits at the pose
+    given by `translations[k]` (the origin of R in the sensor frame S, m) and
+    `rotation_vectors[k]` (R's orientation in S as a rotation vector, rad). Built-in
+    probes have their tip at R's origin.
+
+    These rows are the one stored form of a pose along a trajectory; `X_SR` (the
+    batched Pose the contact stage takes) is computed from them, so a gradient with
+    respect to the trajectory is one with respect to translations and rotation
+    vectors. `rows` (T, 6) is the same data side by side, the key for finding the
+    distinct poses of a trajectory (:func:`hydrotact.sim.find_distinct_poses`).
+    """
 
     times: Float[Array, " num_samples"]
-    X_SR: Pose
+    translations: Float[Array, "num_samples 3"]
     rotation_vectors: Float[Array, "num_samples 3"]
 
     @property
     def num_samples(self) -> int:
         return self.times.shape[0]
+
+    @property
+    def X_SR(self) -> Pose:
+        return jax.vmap(make_pose)(self.translations, self.rotation_vectors)
+
+    @property
+    def rows(self):
+        return jnp.concatenate([self.translations, self.rotation_vectors], axis=-1)
 
 
 def make_trajectory(times, translations, rotation_vectors=None, source: str | None = None) -> Trajectory:
@@ -52,8 +67,7 @@ def make_trajectory(times, translations, rotation_vectors=None, source: str | No
     if np.any(steps <= 0.0):
         row = int(np.flatnonzero(steps <= 0.0)[0]) + 2
         raise HydrotactError(f"{where(source)}row {row}: time {times[row - 1]:g} s does not increase (previous {times[row - 2]:g} s)")
-    X_SR = jax.vmap(make_pose)(jnp.asarray(translations), jnp.asarray(rotation_vectors))
-    return Trajectory(times=jnp.asarray(times), X_SR=X_SR, rotation_vectors=jnp.asarray(rotation_vectors))
+    return Trajectory(times=jnp.asarray(times), translations=jnp.asarray(translations), rotation_vectors=jnp.asarray(rotation_vectors))
 
 
 def read_trajectory(path, units: str = "m") -> Trajectory:
@@ -99,3 +113,31 @@ def read_trajectory(path, units: str = "m") -> Trajectory:
         raise HydrotactError(f"{path}: row {numbered[k][0]}, column time: time {values[k, 0]:g} s does not increase (previous {values[k - 1, 0]:g} s)")
     scale = UNIT_SCALES[units]
     return make_trajectory(values[:, 0], values[:, 1:4] * scale, values[:, 4:7] if rotations else None, source=str(path))
+
+
+def resample_trajectory(trajectory: Trajectory, rate_hz: float) -> Trajectory:
+    """The trajectory at a barometer's sample instants t₀ + k / rate within its span,
+    translations and rotation vectors linear in time between the given samples (as a
+    stage moves between waypoints) (host: the number of samples depends on the span)."""
+    from ..visco import calc_sample_times
+
+    times = np.asarray(trajectory.times)
+    samples = calc_sample_times(times, rate_hz)
+    translations = np.column_stack([np.interp(samples, times, column) for column in np.asarray(trajectory.translations).T])
+    rotations = np.column_stack([np.interp(samples, times, column) for column in np.asarray(trajectory.rotation_vectors).T])
+    return make_trajectory(samples, translations, rotations)
+
+
+def find_distinct_poses(trajectory: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """The trajectory's distinct poses, in the order they first occur, and the index
+    of each sample's pose among them (host). A probe held still repeats its pose, and
+    a pose's response is computed once: holds make up most of a press-and-hold log.
+
+    **Returns:** (rows (D, 6): translation m, rotation vector rad; index (T,) ints).
+    """
+    rows = np.asarray(trajectory.rows, dtype=np.float64)
+    _, first, inverse = np.unique(rows, axis=0, return_index=True, return_inverse=True)
+    order = np.sort(first)
+    position = np.empty(len(rows), dtype=np.int64)
+    position[order] = np.arange(len(order))
+    return rows[order], position[first[inverse.reshape(-1)]]

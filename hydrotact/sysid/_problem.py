@@ -125,32 +125,13 @@ def _log_pose_rows(log) -> np.ndarray:
     return np.column_stack([np.asarray(log.columns[name], dtype=np.float64) for name in POSE_COLUMNS] + [np.asarray(log.columns.get(name, zeros), dtype=np.float64) for name in ROTATION_COLUMNS])
 
 
-def _unit_response_cache(spec, probe_spec: str, field: str, num_rays: int, unique_rows: np.ndarray) -> Path:
-    from .._files import cache_dir, digest
-
-    key = digest("unit-responses-1", spec.name, repr(spec.to_json()), probe_spec, field, int(num_rays), np.ascontiguousarray(unique_rows).tobytes())
-    return cache_dir() / "unit_responses" / f"{key}.npz"
-
-
-def store_unit_responses(spec, probe_spec: str, field: str, num_rays: int, pose_rows, taxels, forces) -> None:
-    """Cache the unit responses of a simulated log (taxels (T, C), forces (T, 3), per
-    pascal of E, at `pose_rows` (T, 6)), so that a full-mode fit of that log does not
-    simulate them again."""
-    from .._files import atomic_path
-
-    unique, first = np.unique(np.asarray(pose_rows, dtype=np.float64), axis=0, return_index=True)
-    with atomic_path(_unit_response_cache(spec, probe_spec, field, num_rays, unique), suffix=".npz") as tmp:
-        np.savez(tmp, taxels=np.asarray(taxels)[first], forces=np.asarray(forces)[first])
-
-
 def _unique_pose_responses(log, source: str, field: str, num_rays: int, progress: bool):
     """Unit responses of the log's taxels and contact force at its probe poses: each
-    distinct pose is simulated once (holds repeat poses), results cached on disk."""
-    from .._contact_job import parse_probe
-    from .._files import atomic_path
-    from ..contact import make_pose
+    distinct pose is simulated once (holds repeat poses), through the simulator's
+    cache of unit responses (so a log simulated by hydrotact fits at once)."""
+    from .._contact_job import parse_probe  # MERGE: from ..contact
     from ..sensors import load_sensor
-    from ..sim import compute_unit_responses, make_sensor_model
+    from ..sim import compute_trajectory_responses, make_sensor_model, make_trajectory
 
     metadata = log.metadata
     missing = [name for name in POSE_COLUMNS if name not in log.columns]
@@ -161,21 +142,12 @@ def _unique_pose_responses(log, source: str, field: str, num_rays: int, progress
     spec = load_sensor(metadata["sensor"], source=f"{source}: sensor")
     if spec.num_taxels != len(metadata["channels"]):
         raise HydrotactError(f"{source}: channels: {len(metadata['channels'])} channels, but sensor {spec.name} has {spec.num_taxels} taxels")
-    unique, inverse = np.unique(_log_pose_rows(log), axis=0, return_inverse=True)
-    inverse = inverse.reshape(-1)
-    cache = _unit_response_cache(spec, metadata["probe"], field, num_rays, unique)
-    if cache.is_file():
-        with np.load(cache) as saved:
-            taxels, forces = saved["taxels"], saved["forces"]
-    else:
-        probe = parse_probe(metadata["probe"])
-        model = make_sensor_model(spec, field_kind=field, num_rays=num_rays)
-        X_SR = jax.vmap(make_pose)(jnp.asarray(unique[:, :3]), jnp.asarray(unique[:, 3:]))
-        unit, _ = compute_unit_responses(model, probe, X_SR, progress=progress)
-        taxels, forces = np.asarray(unit.taxel_pressures), np.asarray(unit.force_S)
-        with atomic_path(cache, suffix=".npz") as tmp:
-            np.savez(tmp, taxels=taxels, forces=forces)
-    return taxels[inverse], forces[inverse]
+    probe = parse_probe(metadata["probe"])
+    model = make_sensor_model(spec, field_kind=field, num_rays=num_rays)
+    rows = _log_pose_rows(log)
+    trajectory = make_trajectory(np.asarray(log.times, dtype=np.float64), rows[:, :3], rows[:, 3:], source=source)
+    unit = compute_trajectory_responses(model, probe, trajectory, progress=progress)
+    return np.asarray(unit.taxel_pressures), np.asarray(unit.force_S)
 
 
 def _channel_values(log) -> np.ndarray:

@@ -2,7 +2,7 @@
 receptive field (disk or cone) and aggregating the pressures hit."""
 
 from ._patterns import (
-    FIELD_KINDS as FIELD_KINDS,
+    ReceptiveFieldKind as ReceptiveFieldKind,
     TaxelLayout as TaxelLayout,
     calc_spiral as calc_spiral,
     calc_taxel_rays as calc_taxel_rays,

@@ -22,11 +22,20 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import HydrotactError
+from .._choices import Choice
 from .._math import safe_norm
 from .._types import Array, Bool, Float
 
 GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))
-FIELD_KINDS = ("disk", "cone")
+
+
+class ReceptiveFieldKind(Choice):
+    """Receptive field kind: `disk`, parallel rays over a disk around the sensing
+    axis (flat arrays, as in the hydroelastic tactile paper), or `cone`, rays fanning
+    out from the embedded barometer (curved sensors)."""
+
+    DISK = "disk"
+    CONE = "cone"
 
 
 class TaxelLayout(eqx.Module):
@@ -65,7 +74,7 @@ def make_taxel_layout(positions_S, axes_S, field_kinds, field_sizes) -> TaxelLay
             f"{len(kinds)} field kinds do not describe the same number of taxels"
         )
     for index in range(count):
-        if kinds[index] not in FIELD_KINDS:
+        if kinds[index] not in tuple(ReceptiveFieldKind):
             raise HydrotactError(f"taxel {index}: receptive field kind must be 'disk' or 'cone', got {kinds[index]!r}")
         if not (np.all(np.isfinite(positions[index])) and np.all(np.isfinite(axes[index]))):
             raise HydrotactError(f"taxel {index}: position and axis must be finite")

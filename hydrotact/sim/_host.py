@@ -1,0 +1,214 @@
+"""The host entry to the forward model: chunks, buffer growth, progress, the cache of
+unit responses, and resumable runs.
+
+:func:`simulate` returns what :func:`hydrotact.sim.calc_simulation` returns, for
+trajectories of any length: the unit responses of the trajectory's *distinct* poses
+(a probe held still repeats its pose) are computed in jitted chunks, every buffer that
+overflows is grown and its chunk recomputed, and then the pure
+:func:`hydrotact.sim.calc_samples` applies the material and the barometer.
+
+Unit responses are the expensive part, and the same ones serve a simulation and every
+fit of its log: they are cached on disk (`hydrotact._files.cache_dir()`), keyed by the
+content of the sensor model, the probe and the distinct poses. A long run also saves
+its finished blocks to a checkpoint file (atomically, after each block), and a run
+with the same inputs picks them up after an interruption (SIGKILL included).
+"""
+
+import dataclasses
+import zipfile
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import __version__
+from .._files import atomic_path, cache_dir, digest
+from ..contact import map_over_poses, make_pose
+from ..contact._api import grown_contact_capacity
+from ..taxel import grown_capacity
+from ..visco import BarometerSignal, Prony
+from ._model import SensorModel
+from ._simulate import Samples, SimCapacity, UnitResponse, calc_samples, calc_unit_response
+from ._trajectory import Trajectory, find_distinct_poses
+
+# Distinct poses per saved block of a resumable run.
+BLOCK = 512
+_CACHE_VERSION = "unit-responses-2"
+
+
+@eqx.filter_jit
+def _chunk_response(model, probe, X_SR, capacity):
+    return map_over_poses(lambda X: calc_unit_response(model, probe, X, capacity), X_SR)
+
+
+def grown_sim_capacity(capacity: SimCapacity, unit: UnitResponse) -> SimCapacity:
+    """A capacity that holds what the overflowing samples of `unit` needed (host)."""
+    contact, taxel_pairs = capacity.contact, capacity.taxel_pairs
+    contact_overflow, taxel_overflow = np.asarray(unit.contact_overflow), np.asarray(unit.taxel_overflow)
+    if contact_overflow.any():
+        contact = grown_contact_capacity(contact, np.asarray(unit.contact_needed)[contact_overflow])
+    if taxel_overflow.any():
+        taxel_pairs = grown_capacity(taxel_pairs, np.asarray(unit.taxel_needed)[taxel_overflow])
+    return SimCapacity(contact=contact, taxel_pairs=taxel_pairs)
+
+
+def compute_unit_responses(model: SensorModel, probe, X_SR, capacity: SimCapacity | None = None, chunk: int = 128, progress: bool = False):
+    """Unit responses for a batch of poses, in jitted chunks of `chunk` poses, growing
+    buffers (and recomputing the chunk) whenever one overflows (host).
+
+    **Returns:** (UnitResponse with a leading sample axis, as NumPy arrays; the
+    capacity that sufficed).
+    """
+    capacity = capacity or SimCapacity()
+    count = X_SR.translation.shape[0]
+    chunk = max(1, min(chunk, count))
+    pieces = []
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=count, unit="sample", desc=f"simulating {model.name}", leave=False)
+    for start in range(0, count, chunk):
+        index = np.minimum(np.arange(start, start + chunk), count - 1)  # pad the last chunk
+        poses = jax.tree_util.tree_map(lambda a: a[index], X_SR)
+        while True:
+            unit = _chunk_response(model, probe, poses, capacity)
+            if not bool(np.any(np.asarray(unit.overflow))):
+                break
+            capacity = grown_sim_capacity(capacity, unit)
+        used = min(chunk, count - start)
+        pieces.append(jax.tree_util.tree_map(lambda a: np.asarray(a)[:used], unit))
+        if bar is not None:
+            bar.update(used)
+    if bar is not None:
+        bar.close()
+    unit = jax.tree_util.tree_map(lambda *parts: np.concatenate(parts), *pieces)
+    return unit, capacity
+
+
+def _content_digest(*trees) -> str:
+    """A digest of pytrees' array contents, structure and static fields (host)."""
+    parts = []
+    for tree in trees:
+        leaves, treedef = jax.tree_util.tree_flatten(tree)
+        parts.append(str(treedef))
+        parts += [np.ascontiguousarray(np.asarray(leaf)).tobytes() for leaf in leaves]
+    return digest(*parts)
+
+
+def calc_responses_key(model: SensorModel, probe, pose_rows) -> str:
+    """The key of the unit responses of `model` and `probe` at `pose_rows` (D, 6):
+    a digest of their contents, so any change to the mesh, field, layout, ray count,
+    probe or poses makes a new key (host)."""
+    rows = np.ascontiguousarray(np.asarray(pose_rows, dtype=np.float64))
+    return digest(_CACHE_VERSION, __version__, _content_digest(model, probe), rows.tobytes())
+
+
+def _cache_path(key: str) -> Path:
+    return cache_dir() / "unit_responses" / f"{key}.npz"
+
+
+def _load_blocks(path: Path, key: str) -> list[dict]:
+    """The blocks saved in `path` if it was written for `key`; [] if it is absent,
+    of other inputs, or unreadable (it is only a cache: recompute rather than fail)."""
+    if not path.is_file():
+        return []
+    try:
+        with path.open("rb") as handle, np.load(handle, allow_pickle=False) as saved:  # our handle: np.load leaks its own on a bad zip
+            if str(saved["key"]) != key:
+                return []
+            return [dict((name[len(f"{k}/"):], saved[name]) for name in saved.files if name.startswith(f"{k}/")) for k in range(int(saved["num_blocks"]))]
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        return []
+
+
+def _save_blocks(path: Path, key: str, blocks: list[dict]) -> None:
+    arrays = {f"{k}/{name}": value for k, block in enumerate(blocks) for name, value in block.items()}
+    with atomic_path(path, suffix=".npz") as tmp:
+        np.savez(tmp, key=np.array(key), num_blocks=np.array(len(blocks)), **arrays)
+
+
+def compute_pose_responses(model: SensorModel, probe, pose_rows, *, progress: bool = False, checkpoint=None, cache: bool = True, capacity: SimCapacity | None = None) -> UnitResponse:
+    """Unit responses at distinct poses, block by block (host).
+
+    **Arguments:**
+
+    - `pose_rows`: (D, 6) translation (m) and rotation vector (rad) per pose.
+    - `progress`: show a progress bar over the poses.
+    - `checkpoint`: a file to save finished blocks in (atomically, after each); a
+      checkpoint of the same inputs left by an interrupted run is resumed from. The
+      caller removes it once its own output is written.
+    - `cache`: look the responses up in, and store them into, the on-disk cache.
+
+    **Returns:** UnitResponse (NumPy arrays, leading axis D).
+    """
+    from tqdm.auto import tqdm
+
+    rows = np.asarray(pose_rows, dtype=np.float64)
+    key = calc_responses_key(model, probe, rows)
+    if cache:
+        saved = _load_blocks(_cache_path(key), key)
+        if saved:
+            return UnitResponse(**saved[0])
+    checkpoint = None if checkpoint is None else Path(checkpoint)
+    blocks = [] if checkpoint is None else _load_blocks(checkpoint, key)
+    done = sum(len(block["area"]) for block in blocks)  # not len(blocks) * BLOCK: they may have been saved with another BLOCK
+    count = len(rows)
+    with tqdm(total=count, initial=min(count, done), unit="pose", desc=f"simulating {model.name} ({count} distinct poses)", disable=not progress) as bar:
+        for start in range(done, count, BLOCK):
+            stop = min(count, start + BLOCK)
+            X_SR = jax.vmap(make_pose)(jnp.asarray(rows[start:stop, :3]), jnp.asarray(rows[start:stop, 3:]))
+            unit, capacity = compute_unit_responses(model, probe, X_SR, capacity)
+            blocks.append({field.name: np.asarray(getattr(unit, field.name)) for field in dataclasses.fields(unit)})
+            if checkpoint is not None:
+                _save_blocks(checkpoint, key, blocks)
+            bar.update(stop - start)
+    arrays = {name: np.concatenate([block[name] for block in blocks]) for name in blocks[0]}
+    if cache:
+        _save_blocks(_cache_path(key), key, [arrays])
+    return UnitResponse(**arrays)
+
+
+def compute_trajectory_responses(model: SensorModel, probe, trajectory: Trajectory, **options) -> UnitResponse:
+    """Unit responses along a trajectory, each distinct pose computed (or looked up)
+    once (host; `options` as :func:`compute_pose_responses`).
+
+    **Returns:** UnitResponse (NumPy arrays, leading axis: the trajectory's samples).
+    """
+    rows, index = find_distinct_poses(trajectory)
+    unit = compute_pose_responses(model, probe, rows, **options)
+    return jax.tree_util.tree_map(lambda a: a[index], unit)
+
+
+_calc_samples = eqx.filter_jit(calc_samples)
+
+
+def simulate(
+    model: SensorModel,
+    material: Prony,
+    probe,
+    trajectory: Trajectory,
+    *,
+    barometer: BarometerSignal | None = None,
+    key=None,
+    capacity: SimCapacity | None = None,
+    progress: bool = False,
+    checkpoint=None,
+    cache: bool = True,
+) -> Samples:
+    """Simulate the sensor along a probe trajectory of any length (host entry point).
+
+    The same Samples as :func:`hydrotact.sim.calc_simulation` with the same
+    arguments, computed in chunks over the trajectory's distinct poses with buffers
+    grown until nothing overflows (never truncated), an optional progress bar, the
+    unit-response cache and an optional checkpoint (see
+    :func:`compute_pose_responses`).
+
+    **Returns:** Samples (NumPy arrays).
+    """
+    unit = compute_trajectory_responses(model, probe, trajectory, progress=progress, checkpoint=checkpoint, cache=cache, capacity=capacity)
+    unit = jax.tree_util.tree_map(jnp.asarray, unit)
+    samples = _calc_samples(model, material, jnp.asarray(trajectory.times), unit, barometer, key)
+    return jax.tree_util.tree_map(np.asarray, samples)
