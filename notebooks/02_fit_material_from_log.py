@@ -357,13 +357,15 @@ plt.show()
 # `write_fit_outputs` writes what `hydrotact fit` writes: `material.json` (the Prony
 # series with standard errors, its covariance, the channel gains and offsets, and
 # provenance: which log, its SHA-256, solver, criterion), `report.json` (every number
-# and per-channel residual diagnostics) and three plots.
+# and per-channel residual diagnostics) and, drawn by `hydrotact.viz.plot_fit`, three
+# plots (the `sysid` stage itself draws nothing).
 
 # %%
 from hydrotact.sysid import write_fit_outputs
+from hydrotact.viz import plot_fit
 
 fit_dir = OUT / "fit"
-report = write_fit_outputs(result, fit_dir, paths=[str(log_path)])
+report = write_fit_outputs(result, fit_dir, paths=[str(log_path)], plot=plot_fit)
 print("\n".join(f"{key}: {value}" for key, value in report["files"].items()))
 
 # %% [markdown]
@@ -503,7 +505,7 @@ for k, (ratio, tau) in enumerate(lumped.terms):
     if k < len(TRUTH["taus"]) and k < len(full_relative):
         print(f"{f'E{k + 1}/E∞':<10}{TRUTH['moduli'][k] / TRUTH['long_term_modulus']:>10.4f}{full_relative[k][0]:>10.4f}{ratio.value:>14.4f} ± {ratio.std:.2g}")
         print(f"{f'τ{k + 1} [s]':<10}{TRUTH['taus'][k]:>10.4f}{full_relative[k][1]:>10.4f}{tau.value:>14.4f} ± {tau.std:.2g}")
-lumped_report = write_fit_outputs(lumped, OUT / "fit_lumped", paths=[str(user_csv)])
+lumped_report = write_fit_outputs(lumped, OUT / "fit_lumped", paths=[str(user_csv)], plot=plot_fit)
 for label, response in lumped_report["elastic_response"].items():
     print(f"{label}: amplitude {response['amplitude_Pa']['value'] / 1e3:.1f} kPa, exponent {response['exponent']['value']:.3f} ± {response['exponent']['std']:.2g}")
 

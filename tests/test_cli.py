@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 from helpers import assert_one_line_error, box_surface, run_cli
 
+from hydrotact.field import DEFAULT_MODULUS
 from hydrotact.mesh import CORE, read_mesh
 
 
@@ -92,7 +93,8 @@ def test_contact_command(tmp_path):
     np.testing.assert_allclose(report["area_m2"], tip_area + wall_area, rtol=1e-9)
     assert report["force_N"][2] < 0 and abs(report["force_N"][0]) < 1e-3 * abs(report["force_N"][2])
     np.testing.assert_allclose(report["centroid_m"][:2], [0.0, 2.2e-3], atol=1e-9)
-    assert 0 < report["max_pressure_Pa"] <= 1e5
+    assert report["modulus_Pa"] == DEFAULT_MODULUS == 1e6  # the default when --modulus is left out
+    assert 0 < report["max_pressure_Pa"] <= DEFAULT_MODULUS
     assert png.stat().st_size > 10_000
 
     plane = json.loads(run_cli("contact", "--sensor", "sphere8", "--probe", "plane", "--at", "0,0,1mm", "--json").stdout)

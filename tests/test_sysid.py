@@ -421,8 +421,9 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 def _check_outputs(result, out_dir):
     from hydrotact.sysid import write_fit_outputs
+    from hydrotact.viz import plot_fit
 
-    report = write_fit_outputs(result, out_dir)
+    report = write_fit_outputs(result, out_dir, plot=plot_fit)
     material = read_material(out_dir / "material.json")
     saved = json.loads((out_dir / "report.json").read_text())
     assert saved["files"] == report["files"]

@@ -11,6 +11,7 @@ from ._broadphase import Capacity as Capacity, TetClusters as TetClusters, make_
 from ._half_space import calc_half_space_surface as calc_half_space_surface
 from ._polygon import calc_polygon_integrals as calc_polygon_integrals, clip_polygon as clip_polygon
 from ._pose import Pose as Pose, calc_rotation_from_vector as calc_rotation_from_vector, make_pose as make_pose
+from ._press import calc_skin_height as calc_skin_height, press_probe as press_probe
 from ._rigid import (
     HalfSpace as HalfSpace,
     RigidSurface as RigidSurface,

@@ -1,5 +1,6 @@
 """The strain field e and the pressure field p = E e on a tetrahedral mesh."""
 
+from .._defaults import DEFAULT_MODULUS as DEFAULT_MODULUS  # documented in hydrotact/_defaults.py
 from ._assembly import (
     StiffnessPattern as StiffnessPattern,
     apply_stiffness as apply_stiffness,
@@ -9,6 +10,7 @@ from ._assembly import (
 )
 from ._distance import calc_distance_field as calc_distance_field
 from ._pressure import PressureField as PressureField, make_pressure_field as make_pressure_field
+from ._report import FIELD_KINDS as FIELD_KINDS, solve_field_report as solve_field_report
 from ._solve import (
     LaplaceProblem as LaplaceProblem,
     StrainSolution as StrainSolution,

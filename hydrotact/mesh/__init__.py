@@ -1,6 +1,7 @@
 """Tetrahedral meshes of elastomers: the TetMesh pytree, builders, quality, I/O."""
 
 from ._io import MESH_SUFFIXES as MESH_SUFFIXES, read_mesh as read_mesh, to_pyvista as to_pyvista, write_mesh as write_mesh
+from ._load import load_tet_mesh as load_tet_mesh
 from ._primitives import (
     make_ball as make_ball,
     make_box as make_box,

@@ -18,7 +18,7 @@ import numpy as np
 
 from .._errors import HydrotactError
 from .._schemas import format_path, parse_json, read_json, validate
-from ..mesh import SEED_SENSORS, SURFACE_SUFFIXES, TetMesh, load_surface, make_seed_mesh, seed_surface
+from ..mesh import SEED_SENSORS, SURFACE_SUFFIXES, TetMesh, load_surface, load_tet_mesh, make_seed_mesh, seed_surface
 from ..mesh._surface import UNIT_SCALES
 from ._builtins import BUILTIN_SENSORS
 from ._inside import find_points_outside_surface, find_points_outside_tets
@@ -141,8 +141,6 @@ class SensorSpec:
         if geometry.kind == "seed":
             mesh = make_seed_mesh(geometry.seed, geometry.edge_length)
         else:
-            from .._jobs import load_tet_mesh  # the command line's surface -> mesh path
-
             scale = UNIT_SCALES[geometry.surface_units]
             mesh = load_tet_mesh(
                 geometry.path,

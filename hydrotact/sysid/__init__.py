@@ -10,8 +10,14 @@ from ._fit import (
     fit_problem as fit_problem,
     make_initial_guess as make_initial_guess,
 )
+from ._job import fit_logs as fit_logs, parse_terms as parse_terms, read_logs as read_logs
 from ._model import ParameterLayout as ParameterLayout, calc_predictions as calc_predictions, calc_residuals as calc_residuals
 from ._problem import FitProblem as FitProblem, LogArrays as LogArrays, make_fit_problem as make_fit_problem
 from ._relaxation import RelaxationFit as RelaxationFit, fit_relaxation_curve as fit_relaxation_curve
-from ._report import make_fit_material as make_fit_material, make_report as make_report, write_fit_outputs as write_fit_outputs
+from ._report import (
+    calc_relaxation_band as calc_relaxation_band,
+    make_fit_material as make_fit_material,
+    make_report as make_report,
+    write_fit_outputs as write_fit_outputs,
+)
 from ._solve import SOLVERS as SOLVERS, solve_least_squares as solve_least_squares

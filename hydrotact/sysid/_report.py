@@ -5,9 +5,8 @@
   offsets, and provenance (logs with SHA-256, solver, mode, criterion).
 - `report.json`: every parameter ± standard error, the fit's statistics, residual
   diagnostics per channel, and the criterion per number of terms when it was chosen.
-- `traces.png` (measured vs fitted), `residuals.png` (residuals in noise units over
-  time and their histogram against N(0, 1)), `relaxation.png` (E(t) with a 95 %
-  confidence band from draws of the log-space covariance).
+- plots, drawn by the caller's `plot` (`hydrotact.viz.plot_fit`: traces, residuals,
+  and E(t) with the 95 % band of `calc_relaxation_band`).
 """
 
 import json
@@ -19,8 +18,6 @@ from .. import __version__
 from .._files import write_text_atomic
 from ..data import make_material_document, write_material
 from ._fit import FitResult
-
-_MAX_PLOTTED_CHANNELS = 8
 
 
 def _material_order(result: FitResult) -> list[int]:
@@ -143,84 +140,21 @@ def calc_relaxation_band(result: FitResult, times, draws: int = 400, seed: int =
     return moduli(mean)[0], np.percentile(curves, 2.5, axis=0), np.percentile(curves, 97.5, axis=0)
 
 
-def plot_fit(result: FitResult, out_dir) -> dict:
-    """traces.png, residuals.png and relaxation.png in out_dir; returns their paths."""
-    import matplotlib.pyplot as plt
+def write_fit_outputs(result: FitResult, out_dir, paths=(), plot=None) -> dict:
+    """material.json, report.json and, with `plot`, the plots in out_dir (each written
+    atomically).
 
-    from ..viz import save_figure
-
-    out_dir = Path(out_dir)
-    paths = {"traces_png": out_dir / "traces.png", "residuals_png": out_dir / "residuals.png", "relaxation_png": out_dir / "relaxation.png"}
-    predictions = result.predictions()
-    logs = result.problem.logs
-    infos = result.problem.infos
-
-    # Measured vs fitted: the channels that move most, per log.
-    figure, axes = plt.subplots(len(logs), 1, figsize=(10, 3.6 * len(logs)), squeeze=False)
-    for axis, log, info, prediction in zip(axes[:, 0], logs, infos, predictions):
-        observed = np.asarray(log.observed)
-        times = np.asarray(log.times)
-        count = log.num_channels
-        spread = observed[:, :count].max(axis=0) - observed[:, :count].min(axis=0)
-        for c in np.argsort(spread)[::-1][:_MAX_PLOTTED_CHANNELS]:
-            base = observed[0, c]
-            line = axis.plot(times, (observed[:, c] - base) / 1e3, lw=0.8, alpha=0.6)[0]
-            axis.plot(times, (prediction[:, c] - base) / 1e3, "--", lw=1.0, color=line.get_color(), label=info.channels[c])
-        axis.set_ylabel("reading − first sample [kPa]")
-        axis.set_title(f"{info.source}: measured (solid) and fitted (dashed)", fontsize=9)
-        axis.legend(ncol=4, fontsize=7)
-    axes[-1, 0].set_xlabel("time [s]")
-    figure.tight_layout()
-    save_figure(figure, paths["traces_png"])
-
-    # Residuals in noise units.
-    figure, (left, right) = plt.subplots(1, 2, figsize=(11, 3.6), gridspec_kw={"width_ratios": [3, 1]})
-    everything = []
-    for log, info, prediction in zip(logs, infos, predictions):
-        normalised = (np.asarray(log.observed) - prediction) * np.asarray(log.weights)
-        everything.append(normalised.reshape(-1))
-        for c, name in enumerate((info.channels + info.force_columns)[:_MAX_PLOTTED_CHANNELS]):
-            left.plot(np.asarray(log.times), normalised[:, c], lw=0.4, alpha=0.7, label=name)
-    left.set_xlabel("time [s]")
-    left.set_ylabel("residual / noise σ")
-    left.set_title(f"residuals (reduced χ² = {result.reduced_chi_square:.3f})", fontsize=9)
-    everything = np.concatenate(everything)
-    grid = np.linspace(-5, 5, 201)
-    right.hist(np.clip(everything, -5, 5), bins=60, density=True, alpha=0.6)
-    right.plot(grid, np.exp(-0.5 * grid**2) / np.sqrt(2 * np.pi), "k", lw=1, label="N(0, 1)")
-    right.set_xlabel("residual / noise σ")
-    right.legend(fontsize=7)
-    figure.tight_layout()
-    save_figure(figure, paths["residuals_png"])
-
-    # Relaxation modulus with its confidence band.
-    span = max(float(log.times[-1] - log.times[0]) for log in logs)
-    step = min(float(np.min(np.diff(np.asarray(log.times)))) for log in logs)
-    times = np.logspace(np.log10(step / 2), np.log10(span * 2), 200)
-    modulus, low, high = calc_relaxation_band(result, times)
-    unit, label = (1e3, "E(t) [kPa]") if result.layout.has_long_term else (1.0, "E(t) / E∞")
-    figure, axis = plt.subplots(figsize=(6.5, 4))
-    axis.fill_between(times, low / unit, high / unit, alpha=0.3, label="95 % band")
-    axis.semilogx(times, modulus / unit, "k", lw=1.2, label="fitted")
-    for _, tau in result.terms:
-        axis.axvline(tau.value, color="grey", lw=0.6, ls=":")
-    axis.set_xlabel("time [s]")
-    axis.set_ylabel(label)
-    axis.set_title(f"relaxation modulus, {result.layout.num_terms} Prony terms", fontsize=9)
-    axis.legend(fontsize=8)
-    figure.tight_layout()
-    save_figure(figure, paths["relaxation_png"])
-    return {key: str(path) for key, path in paths.items()}
-
-
-def write_fit_outputs(result: FitResult, out_dir, paths=()) -> dict:
-    """material.json, report.json and the plots in out_dir (each written atomically)."""
+    `plot(result, out_dir) -> {name: path}` draws the pictures: pass
+    `hydrotact.viz.plot_fit` for traces.png, residuals.png and relaxation.png. The
+    stage draws nothing itself (no stage imports `hydrotact.viz`). Returns the report,
+    with `files` naming everything written."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     files = {"material": str(out_dir / "material.json"), "report": str(out_dir / "report.json")}
     write_material(files["material"], make_fit_material(result, paths))
     report = make_report(result)
-    files.update(plot_fit(result, out_dir))
+    if plot is not None:
+        files.update(plot(result, out_dir))
     report["files"] = files
     write_text_atomic(files["report"], json.dumps(report, indent=2) + "\n")
     return report

@@ -1,0 +1,25 @@
+"""Argument types and flags shared by several commands."""
+
+import argparse
+
+from .._defaults import DEFAULT_MODULUS
+
+MODULUS_HELP = f"hydroelastic modulus in Pa (default {DEFAULT_MODULUS:.0e})".replace("e+0", "e")
+"""Help of every --modulus flag (its default is hydrotact.field.DEFAULT_MODULUS)."""
+
+
+def number(text: str) -> float:
+    """An argparse type: a float, or a one-line usage error."""
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+
+
+def add_source_arguments(parser: argparse.ArgumentParser, what: str) -> None:
+    """The sensor-or-file argument and its meshing flags (mesh, field)."""
+    parser.add_argument("source", metavar=what, help="a built-in sensor (pad5x5, sphere8, ellipsoid8) or a file")
+    parser.add_argument("--edge-length", type=number, metavar="L", help="target tet edge length in metres (sensors, surfaces)")
+    parser.add_argument("--units", default="m", choices=["m", "mm", "cm", "um"], help="length unit of a surface file (default m)")
+    parser.add_argument("--core-plane", type=number, metavar="Z", help="the core (bonded) faces lie on the plane z = Z, in --units (default: the lowest z)")
+    parser.add_argument("--json", action="store_true", help="print the report as JSON")

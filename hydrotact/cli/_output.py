@@ -1,0 +1,18 @@
+"""Printing reports: a two-column rich table, or JSON with --json."""
+
+import json
+
+
+def print_report(title: str, report: dict, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(report, indent=2))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=title, show_header=False)
+    for key, value in report.items():
+        if isinstance(value, float):
+            value = f"{value:.6g}"
+        table.add_row(key, str(value))
+    Console().print(table)

@@ -1,0 +1,50 @@
+"""A tet mesh from what a user names: a built-in sensor, a closed surface file or a
+tet mesh file."""
+
+from pathlib import Path
+
+import numpy as np
+
+from .._errors import HydrotactError
+from ._io import MESH_SUFFIXES, read_mesh
+from ._seeds import SEED_SENSORS, make_seed_mesh
+from ._surface import SURFACE_SUFFIXES, UNIT_SCALES, load_surface
+from ._tags import Plane
+from ._tetmesh import TetMesh
+from ._tetrahedralize import tetrahedralize
+
+
+def load_tet_mesh(
+    spec: str,
+    *,
+    edge_length: float | None = None,
+    units: str = "m",
+    core_plane_z: float | None = None,
+) -> TetMesh:
+    """A tet mesh from a seed sensor name, a closed surface file or a mesh file.
+
+    Surfaces are meshed by fTetWild with their core on the plane z = `core_plane_z`
+    (default: the lowest z of the surface, where it sits on the PCB).
+    """
+    if spec in SEED_SENSORS:
+        return make_seed_mesh(spec, edge_length)
+    path = Path(spec)
+    suffix = path.suffix.lower()
+    if suffix in MESH_SUFFIXES:
+        if edge_length is not None:
+            raise HydrotactError(f"{path}: --edge-length applies to sensors and surfaces, not to an existing tet mesh")
+        core = None if core_plane_z is None else Plane((0.0, 0.0, core_plane_z), tolerance=1e-9)
+        return read_mesh(path, core=core)[0]
+    if suffix in SURFACE_SUFFIXES:
+        surface = load_surface(path, units)
+        lo, hi = surface.bounds
+        if edge_length is None:
+            edge_length = float(np.linalg.norm(hi - lo)) / 20.0
+        z = float(lo[2]) if core_plane_z is None else core_plane_z * UNIT_SCALES[units]
+        return tetrahedralize(surface, edge_length, core=Plane((0.0, 0.0, z)), source=str(path))
+    if path.exists():
+        raise HydrotactError(
+            f"{path}: unknown file type {suffix!r}; give a surface ({', '.join(SURFACE_SUFFIXES)}) "
+            f"or a tet mesh ({', '.join(MESH_SUFFIXES)})"
+        )
+    raise HydrotactError(f"{spec}: neither a built-in sensor ({', '.join(SEED_SENSORS)}) nor an existing file")

@@ -1,0 +1,85 @@
+"""The fit job: barometer logs -> a fitted material, a report and (given a plotter)
+pictures.
+
+Everything the user gave is read and checked before anything is written; the outputs
+(material.json, report.json, PNGs) are each written atomically into the output folder.
+Unit responses of full-mode fits are cached (they are the expensive part), so a second
+fit of the same logs with other options starts at once.
+"""
+
+import warnings
+from pathlib import Path
+
+from .._errors import HydrotactError
+from ..data import LogWarning, read_log, tare_log
+from ._fit import MAX_AUTO_TERMS, fit_auto, fit_problem
+from ._problem import make_fit_problem
+from ._report import write_fit_outputs
+from ._solve import SOLVERS
+
+
+def parse_terms(text) -> int | str:
+    """'auto' or a non-negative integer."""
+    if str(text) == "auto":
+        return "auto"
+    try:
+        value = int(text)
+    except ValueError:
+        raise HydrotactError(f"--terms: expected a number of Prony terms or 'auto', got {text!r}") from None
+    if value < 0 or value > 8:
+        raise HydrotactError(f"--terms: expected 0 to 8 Prony terms, got {value}")
+    return value
+
+
+def read_logs(paths, mapping=None, sensor=None, report_warning=None):
+    """Read and check every log first (one error line, nothing written)."""
+    if not paths:
+        raise HydrotactError("no logs given")
+    logs = []
+    for path in paths:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", LogWarning)
+            logs.append(read_log(path, mapping, sensor=sensor))
+        for warning in caught:
+            if issubclass(warning.category, LogWarning) and report_warning is not None:
+                report_warning(str(warning.message))
+            else:
+                warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
+    return logs
+
+
+def fit_logs(paths, output, *, sensor=None, lumped=False, indentation="indentation", mapping=None, terms="auto", solver="lm", tare=False, field=None, num_rays=None, progress=True, report_warning=None, plot=None) -> dict:
+    """Fit the logs at `paths` and write material.json, report.json (and, with `plot`,
+    the pictures) into `output`. With `tare`, each log is first tared on its no-load
+    segments (found automatically; the baseline interpolated in time between them),
+    which takes out the slow drift of aged sensors that constant offsets cannot.
+    `plot(result, output) -> {name: path}` draws the pictures (the command line passes
+    `hydrotact.viz.plot_fit`; the stage draws nothing itself). Returns the report
+    (with `files`)."""
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    output = Path(output)
+    if output.exists() and not output.is_dir():
+        raise HydrotactError(f"{output}: exists and is not a folder; -o names the folder the fit writes into")
+    if solver not in SOLVERS:
+        raise HydrotactError(f"--solver: unknown solver {solver!r}; use one of {', '.join(SOLVERS)}")
+    terms = parse_terms(terms)
+    logs = read_logs([Path(p) for p in paths], mapping, sensor, report_warning)
+    if tare:
+        logs = [tare_log(log, source=str(path))[0] for log, path in zip(logs, paths)]
+    mode = "lumped" if lumped else "full"
+    problem = make_fit_problem(logs, mode=mode, indentation=indentation, field=field, num_rays=num_rays, sources=[str(p) for p in paths], progress=progress)
+    counts = list(range(MAX_AUTO_TERMS + 1)) if terms == "auto" else [terms]
+    with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} fits"), TimeElapsedColumn(), transient=True, disable=not progress) as bar:
+        task = bar.add_task(f"fitting ({solver})", total=len(counts))
+        if terms == "auto":
+            result = fit_auto(problem, solver, progress=lambda k: bar.update(task, advance=1, description=f"fitting ({solver}): {k} terms done"))
+        else:
+            result = fit_problem(problem, terms, solver)
+            bar.update(task, advance=1)
+    if not result.converged:
+        message = f"the {solver} solver stopped before converging ({result.num_steps} steps); the numbers below are its last iterate"
+        if report_warning is not None:
+            report_warning(message)
+    report = write_fit_outputs(result, output, paths=[str(p) for p in paths], plot=plot)
+    return report

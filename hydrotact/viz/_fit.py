@@ -1,0 +1,85 @@
+"""Plots of a material fit: measured vs fitted traces, residuals, relaxation modulus.
+
+- `traces.png` (measured vs fitted), `residuals.png` (residuals in noise units over
+  time and their histogram against N(0, 1)), `relaxation.png` (E(t) with a 95 %
+  confidence band from draws of the log-space covariance).
+"""
+
+from pathlib import Path
+
+import numpy as np
+
+from ._plots import save_figure
+
+_MAX_PLOTTED_CHANNELS = 8
+
+
+def plot_fit(result, out_dir) -> dict:
+    """traces.png, residuals.png and relaxation.png of a `hydrotact.sysid.FitResult`
+    in out_dir; returns their paths (the `plot` of `sysid.write_fit_outputs`)."""
+    import matplotlib.pyplot as plt
+
+    from ..sysid import calc_relaxation_band
+
+    out_dir = Path(out_dir)
+    paths = {"traces_png": out_dir / "traces.png", "residuals_png": out_dir / "residuals.png", "relaxation_png": out_dir / "relaxation.png"}
+    predictions = result.predictions()
+    logs = result.problem.logs
+    infos = result.problem.infos
+
+    # Measured vs fitted: the channels that move most, per log.
+    figure, axes = plt.subplots(len(logs), 1, figsize=(10, 3.6 * len(logs)), squeeze=False)
+    for axis, log, info, prediction in zip(axes[:, 0], logs, infos, predictions):
+        observed = np.asarray(log.observed)
+        times = np.asarray(log.times)
+        count = log.num_channels
+        spread = observed[:, :count].max(axis=0) - observed[:, :count].min(axis=0)
+        for c in np.argsort(spread)[::-1][:_MAX_PLOTTED_CHANNELS]:
+            base = observed[0, c]
+            line = axis.plot(times, (observed[:, c] - base) / 1e3, lw=0.8, alpha=0.6)[0]
+            axis.plot(times, (prediction[:, c] - base) / 1e3, "--", lw=1.0, color=line.get_color(), label=info.channels[c])
+        axis.set_ylabel("reading − first sample [kPa]")
+        axis.set_title(f"{info.source}: measured (solid) and fitted (dashed)", fontsize=9)
+        axis.legend(ncol=4, fontsize=7)
+    axes[-1, 0].set_xlabel("time [s]")
+    figure.tight_layout()
+    save_figure(figure, paths["traces_png"])
+
+    # Residuals in noise units.
+    figure, (left, right) = plt.subplots(1, 2, figsize=(11, 3.6), gridspec_kw={"width_ratios": [3, 1]})
+    everything = []
+    for log, info, prediction in zip(logs, infos, predictions):
+        normalised = (np.asarray(log.observed) - prediction) * np.asarray(log.weights)
+        everything.append(normalised.reshape(-1))
+        for c, name in enumerate((info.channels + info.force_columns)[:_MAX_PLOTTED_CHANNELS]):
+            left.plot(np.asarray(log.times), normalised[:, c], lw=0.4, alpha=0.7, label=name)
+    left.set_xlabel("time [s]")
+    left.set_ylabel("residual / noise σ")
+    left.set_title(f"residuals (reduced χ² = {result.reduced_chi_square:.3f})", fontsize=9)
+    everything = np.concatenate(everything)
+    grid = np.linspace(-5, 5, 201)
+    right.hist(np.clip(everything, -5, 5), bins=60, density=True, alpha=0.6)
+    right.plot(grid, np.exp(-0.5 * grid**2) / np.sqrt(2 * np.pi), "k", lw=1, label="N(0, 1)")
+    right.set_xlabel("residual / noise σ")
+    right.legend(fontsize=7)
+    figure.tight_layout()
+    save_figure(figure, paths["residuals_png"])
+
+    # Relaxation modulus with its confidence band.
+    span = max(float(log.times[-1] - log.times[0]) for log in logs)
+    step = min(float(np.min(np.diff(np.asarray(log.times)))) for log in logs)
+    times = np.logspace(np.log10(step / 2), np.log10(span * 2), 200)
+    modulus, low, high = calc_relaxation_band(result, times)
+    unit, label = (1e3, "E(t) [kPa]") if result.layout.has_long_term else (1.0, "E(t) / E∞")
+    figure, axis = plt.subplots(figsize=(6.5, 4))
+    axis.fill_between(times, low / unit, high / unit, alpha=0.3, label="95 % band")
+    axis.semilogx(times, modulus / unit, "k", lw=1.2, label="fitted")
+    for _, tau in result.terms:
+        axis.axvline(tau.value, color="grey", lw=0.6, ls=":")
+    axis.set_xlabel("time [s]")
+    axis.set_ylabel(label)
+    axis.set_title(f"relaxation modulus, {result.layout.num_terms} Prony terms", fontsize=9)
+    axis.legend(fontsize=8)
+    figure.tight_layout()
+    save_figure(figure, paths["relaxation_png"])
+    return {key: str(path) for key, path in paths.items()}
