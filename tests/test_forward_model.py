@@ -152,7 +152,7 @@ def _demo_truth():
 
 def test_demo_log_is_unchanged(tmp_path):
     """The demo's (smoke) log through the new path: the columns recorded before."""
-    from hydrotact._demo_job import SMOKE_PRESSES, make_demo_trajectory
+    from hydrotact.cli.demo import SMOKE_PRESSES, make_demo_trajectory
 
     waypoints = np.array([[float(f"{value:.9g}") for value in row] for row in make_demo_trajectory(SMOKE_PRESSES)])
     trajectory = make_trajectory(waypoints[:, 0], waypoints[:, 1:4])

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from helpers import assert_one_line_error, run_cli
 
-import hydrotact._simulate_job as job
+import hydrotact.cli.simulate as job
 import hydrotact.sim._host as host
 from hydrotact import HydrotactError
 from hydrotact.cli import main

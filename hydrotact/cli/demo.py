@@ -1,7 +1,122 @@
-"""`hydrotact demo`: the main job on built-in data (simulate a pad5x5 log with a known
-viscoelastic material, fit it back)."""
+"""`hydrotact demo`: hydrotact's main job, end to end, on built-in data.
 
+1. A probe trajectory over the pad5x5 sensor: a Ø2 mm flat cylinder presses six
+   taxels in turn (0.4 s ramps, holds of 3 to 25 s, rests between), as a stage would.
+2. A known viscoelastic material (E∞ and three Prony terms with well-separated τ),
+   written as `truth_material.json`.
+3. `hydrotact simulate --material truth_material.json --barometer`: absolute BMP388
+   readings (ambient, per-channel gain and offset, noise, 0.016 Pa LSB, 100 Hz) and
+   load-cell forces with noise -> `demo_log.parquet` and its plot.
+4. `hydrotact fit demo_log.parquet`: the material, gains and offsets fitted back ->
+   `fit/` (material.json, report.json, traces, residuals, relaxation plots).
+5. Truth vs fit ± standard errors, printed and saved in `summary.json`.
+"""
+
+import json
 from pathlib import Path
+
+import numpy as np
+
+from .._files import write_text_atomic
+
+TOP = 4e-3  # pad5x5's skin height, m
+PRESSES = (  # (x, y) m, depth m, hold s, rest after s
+    ((0.0, 0.0), 0.45e-3, 25.0, 12.0),
+    ((2.2e-3, 0.0), 0.35e-3, 4.0, 4.0),
+    ((-2.2e-3, 2.2e-3), 0.5e-3, 12.0, 20.0),
+    ((0.0, -2.2e-3), 0.3e-3, 3.0, 3.0),
+    ((2.2e-3, 2.2e-3), 0.4e-3, 8.0, 10.0),
+    ((-2.2e-3, -2.2e-3), 0.45e-3, 18.0, 8.0),
+)
+RAMP = 0.4
+MOVE = 0.1  # s, lateral moves between presses
+TRUTH = {"long_term_modulus": 6.0e5, "moduli": [2.5e5, 1.5e5, 1.0e5], "taus": [0.3, 3.0, 30.0]}
+
+
+def make_demo_trajectory(presses=PRESSES) -> np.ndarray:
+    """Waypoints (time s, x, y, z m) of the demo's presses; the stage moves linearly
+    between them (z is the probe tip, 0.3 mm above the skin between presses)."""
+    rows, time = [], 0.0
+    clear = TOP + 0.3e-3
+    x0, y0 = presses[0][0]
+    rows.append((time, x0, y0, clear))
+    time += 2.0
+    rows.append((time, x0, y0, clear))
+    rest_before = 0.0
+    for (x, y), depth, hold, rest in presses:
+        if (x, y) != tuple(rows[-1][1:3]):  # move over the next taxel, then wait there
+            time += MOVE
+            rows.append((time, x, y, clear))
+            time += rest_before
+            rows.append((time, x, y, clear))
+        rest_before = rest
+        time += RAMP * (1 + 0.3e-3 / depth)
+        rows.append((time, x, y, TOP - depth))
+        time += hold
+        rows.append((time, x, y, TOP - depth))
+        time += RAMP * (1 + 0.3e-3 / depth)
+        rows.append((time, x, y, clear))
+    time += rest_before
+    rows.append((time, *rows[-1][1:]))
+    return np.array(rows)
+
+
+SMOKE_PRESSES = (((0.0, 0.0), 0.45e-3, 12.0, 6.0), ((2.2e-3, 0.0), 0.35e-3, 3.0, 3.0))
+
+
+def run_demo(out_dir, progress: bool = True, smoke: bool = False) -> dict:
+    """Simulate the demo log, fit it, write everything into out_dir; returns the
+    summary (also out_dir/summary.json). `smoke`: two presses, two Prony terms
+    (0.3 s, 3 s), 16 rays: the same job at test-suite size."""
+    from ..data import make_material_document, material_prony, write_log, write_material
+    from ..sim import BarometerSettings, make_trajectory, simulate_log
+    from ..sysid import fit_logs
+    from ..viz import plot_fit, plot_log
+    from .fit import print_fit_table
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    # The numbers of the trajectory file are the ones simulated (9 significant digits).
+    waypoints = np.array([[float(f"{value:.9g}") for value in row] for row in make_demo_trajectory(SMOKE_PRESSES if smoke else PRESSES)])
+    trajectory_path = out_dir / "demo_trajectory.csv"
+    write_text_atomic(trajectory_path, "time,x,y,z\n" + "".join(",".join(f"{value:.9g}" for value in row) + "\n" for row in waypoints))
+    truth_numbers = dict(TRUTH)
+    if smoke:
+        truth_numbers.update(moduli=TRUTH["moduli"][:2], taus=TRUTH["taus"][:2])
+    truth = make_material_document(
+        truth_numbers["long_term_modulus"], truth_numbers["moduli"], truth_numbers["taus"], name="demo truth",
+        description="The material the demo log is simulated with.", provenance={"method": "simulation"},
+    )
+    truth_path = out_dir / "truth_material.json"
+    write_material(truth_path, truth)
+    barometer = BarometerSettings(seed=1, noise_rms=0.5, gain_spread=0.05, offset_spread=30.0, force_noise=0.005)
+    probe = "cylinder:d=2mm"
+    log, samples = simulate_log(
+        "pad5x5", probe, make_trajectory(waypoints[:, 0], waypoints[:, 1:4], source=str(trajectory_path)), material_prony(truth, "demo truth"),
+        num_rays=16 if smoke else 32, barometer=barometer, progress=progress,
+    )
+    log_path = out_dir / "demo_log.parquet"
+    write_log(log_path, log)
+    plot_log(log, out_dir / "demo_log.png", title=f"pad5x5: {probe}, E(0) = {float(samples.modulus):g} Pa")
+    simulated = {
+        "sensor": "pad5x5", "probe": probe, "num_samples": log.num_samples, "num_taxels": len(log.metadata["channels"]),
+        "samples_in_contact": int(np.sum(samples.contact)), "max_normal_force_N": float(np.max(samples.normal_force, initial=0.0)),
+        "max_taxel_pressure_Pa": float(np.max(samples.taxel_pressures, initial=0.0)), "log": str(log_path), "png": str(out_dir / "demo_log.png"),
+    }
+    # step 4 is what a user runs on their own log: `hydrotact fit demo_log.parquet`
+    report = fit_logs([log_path], out_dir / "fit", terms=2 if smoke else "auto", progress=progress, plot=plot_fit)
+    gains = {f"pad5x5/{name}": g for name, g in zip(log.metadata["channels"], log.metadata["barometer"]["gains"])}
+    truth_numbers = {**truth_numbers, "instantaneous_modulus": truth_numbers["long_term_modulus"] + sum(truth_numbers["moduli"]), "gains": gains}
+    print_fit_table(report, truth_numbers)
+    summary = {
+        "truth": truth_numbers,
+        "fit": {key: report[key] for key in ("num_terms", "long_term_modulus_Pa", "prony_terms", "instantaneous_modulus_Pa", "reduced_chi_square", "converged", "seconds")},
+        "criterion": report.get("criterion"),
+        "simulation": simulated,
+        "files": {"trajectory": str(trajectory_path), "truth_material": str(truth_path), "log": str(log_path), "log_png": str(out_dir / "demo_log.png"), **report["files"]},
+    }
+    write_text_atomic(out_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
+    return summary
 
 
 def add_parser(subparsers):
@@ -12,8 +127,6 @@ def add_parser(subparsers):
 
 
 def run(args) -> None:
-    from .._demo_job import run_demo  # moving into hydrotact.sim
-
     summary = run_demo(args.output, smoke=args.smoke)
     print(f"hydrotact demo: results in {args.output}/")
     for path in summary["files"].values():

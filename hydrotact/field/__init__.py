@@ -10,7 +10,7 @@ from ._assembly import (
 )
 from ._distance import calc_distance_field as calc_distance_field
 from ._pressure import PressureField as PressureField, make_pressure_field as make_pressure_field
-from ._report import FIELD_KINDS as FIELD_KINDS, solve_field_report as solve_field_report
+from ._report import solve_field_report as solve_field_report
 from ._solve import (
     LaplaceProblem as LaplaceProblem,
     StrainSolution as StrainSolution,

@@ -10,14 +10,14 @@ from .._errors import HydrotactError
 from ..mesh import TetMesh
 from ._distance import calc_distance_field
 from ._solve import make_laplace_problem, solve_strain
+from ._kinds import StrainFieldKind
 
-FIELD_KINDS = ("laplace", "distance")
 
 
 def solve_field_report(
     mesh: TetMesh,
     *,
-    kind: str = "laplace",
+    kind: StrainFieldKind | str = StrainFieldKind.LAPLACE,
     modulus: float = DEFAULT_MODULUS,
     core_depth: float | None = None,
     source: str | None = None,
@@ -32,13 +32,12 @@ def solve_field_report(
     **Returns:** (strain at the vertices (num_vertices,), summary dict with sizes,
     timings, residual and the strain and pressure ranges; timings exclude compilation).
     """
-    if kind not in FIELD_KINDS:
-        raise HydrotactError(f"unknown field kind {kind!r}; use one of {FIELD_KINDS}")
+    kind = StrainFieldKind.parse(kind, "field kind")
     modulus = float(modulus)
     if not np.isfinite(modulus) or modulus <= 0:
         raise HydrotactError(f"the modulus must be a positive pressure in Pa, got {modulus:g}")
-    summary = {"kind": kind, "num_tets": mesh.num_tets, "num_vertices": mesh.num_vertices, "modulus_Pa": modulus}
-    if kind == "laplace":
+    summary = {"kind": str(kind), "num_tets": mesh.num_tets, "num_vertices": mesh.num_vertices, "modulus_Pa": modulus}
+    if kind == StrainFieldKind.LAPLACE:
         problem = make_laplace_problem(mesh, core_depth=core_depth, source=source)
         start = time.perf_counter()
         solve_strain(problem).strain.block_until_ready()
