@@ -14,4 +14,12 @@ from ._model import ParameterLayout as ParameterLayout, calc_predictions as calc
 from ._problem import FitProblem as FitProblem, LogArrays as LogArrays, make_fit_problem as make_fit_problem
 from ._relaxation import RelaxationFit as RelaxationFit, fit_relaxation_curve as fit_relaxation_curve
 from ._report import make_fit_material as make_fit_material, make_report as make_report, write_fit_outputs as write_fit_outputs
-from ._solve import SOLVERS as SOLVERS, solve_least_squares as solve_least_squares
+from ._solve import (
+    SOLVERS as SOLVERS,
+    BoundedLBFGSB as BoundedLBFGSB,
+    GaussNewtonArmijo as GaussNewtonArmijo,
+    LeastSquaresSolution as LeastSquaresSolution,
+    make_solver as make_solver,
+    solve_least_squares as solve_least_squares,
+    solver_name as solver_name,
+)
