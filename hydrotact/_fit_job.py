@@ -72,9 +72,9 @@ def run_fit(paths, output, *, sensor=None, lumped=False, indentation="indentatio
     with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} fits"), TimeElapsedColumn(), transient=True, disable=not progress) as bar:
         task = bar.add_task(f"fitting ({solver})", total=len(counts))
         if terms == "auto":
-            result = fit_auto(problem, solver, progress=lambda k: bar.update(task, advance=1, description=f"fitting ({solver}): {k} terms done"))
+            result = fit_auto(problem, SOLVERS[solver](), progress=lambda k: bar.update(task, advance=1, description=f"fitting ({solver}): {k} terms done"))
         else:
-            result = fit_problem(problem, terms, solver)
+            result = fit_problem(problem, terms, SOLVERS[solver]())
             bar.update(task, advance=1)
     if not result.converged:
         message = f"the {solver} solver stopped before converging ({result.num_steps} steps); the numbers below are its last iterate"
