@@ -527,6 +527,7 @@ def test_write_fit_outputs_full(result_3, tmp_path):
     covariance = material["covariance"]
     assert covariance["space"] == "log" and len(covariance["parameters"]) == 7
     assert report["mode"] == "full" and report["converged"]
+    assert report["solver"] == material["provenance"]["solver"] == "lm"  # the name, as before solvers were objects
 
 
 def test_write_fit_outputs_lumped(lumped_result, tmp_path):

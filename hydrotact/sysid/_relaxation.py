@@ -18,7 +18,7 @@ from .._errors import HydrotactError
 from ..visco import Prony
 from ._fit import MAX_AUTO_TERMS, Estimate, calc_bic, calc_covariance
 from ._initial import _MODULUS_FLOOR, fit_linear_moduli, merge_terms
-from ._solve import Solver, calc_jacobian, check_solver, raise_if_failed, solve_least_squares
+from ._solve import Solver, calc_jacobian, check_solver, solve_least_squares
 
 
 @dataclasses.dataclass(frozen=True)
@@ -81,9 +81,7 @@ def fit_relaxation_curve(times, modulus, num_terms="auto", solver: Solver | None
     taus, term_moduli = merge_terms(grid, moduli[1:], int(num_terms), floor)
     x0 = np.concatenate([[np.log(max(moduli[0], floor))], np.log(term_moduli), np.log(taus)])
     data = (jnp.asarray(times), jnp.asarray(modulus), jnp.asarray(weights))
-    solution = solve_least_squares(_residuals, jnp.asarray(x0), data, solver, throw=False)
-    if throw:
-        raise_if_failed(solution, solver)
+    solution = solve_least_squares(_residuals, jnp.asarray(x0), data, solver, throw=throw)
     x = solution.value
     residuals = np.asarray(_residuals(x, data))
     jacobian = np.asarray(calc_jacobian(_residuals, x, data))
