@@ -13,7 +13,7 @@ noisier than the bare part's datasheet figure), force noise 5 mN RMS.
 
 Log fit (3 Prony terms, E_inf, 8 gains, 8 offsets: 23 parameters):
 
-- hydrotact: `fit_problem(problem, 3, "lm")` (NNLS start, then optimistix LM with
+- hydrotact: `fit_problem(problem, 3, make_solver("lm"))` (NNLS start, then optimistix LM with
   forward-mode Jacobians, all jitted). The first call compiles and runs; the second
   runs only; compile = first - second. "solve" is the jitted solver alone (the
   internal `_run`, from the same start x0), to compare with scipy on equal terms.
@@ -58,7 +58,7 @@ from _machine import describe_machine, write_results  # noqa: E402
 
 from hydrotact.data import BarometerLog  # noqa: E402
 from hydrotact.sensors import known_parts  # noqa: E402
-from hydrotact.sysid import calc_residuals, fit_problem, fit_relaxation_curve, make_fit_problem, make_initial_guess  # noqa: E402
+from hydrotact.sysid import BoundedLBFGSB, calc_residuals, fit_problem, fit_relaxation_curve, make_fit_problem, make_initial_guess, make_solver  # noqa: E402
 from hydrotact.sysid._fit import _run  # noqa: E402
 from hydrotact.sysid._model import pack  # noqa: E402
 from hydrotact.visco import calc_barometer_readings, calc_contact_response, make_barometer_signal, make_prony  # noqa: E402
@@ -231,12 +231,13 @@ def bench_log_fit(args, rows):
         return float(np.max(np.abs(fitted / gains - 1.0)))
 
     results = {}
-    for solver in args.solvers:
+    for name in args.solvers:
+        solver = make_solver(name)
         first, first_seconds = _timed(fit_problem, problem, args.terms, solver)
         second, second_seconds = _timed(fit_problem, problem, args.terms, solver)
         # The jitted solver alone, from the same x0 (compiled by the calls above).
         bounds = None
-        if solver == "lbfgsb":
+        if isinstance(solver, BoundedLBFGSB):
             from hydrotact.sysid._fit import _bounds
 
             bounds = _bounds(problem, layout, x0)
@@ -244,19 +245,19 @@ def bench_log_fit(args, rows):
         # do not key the compilation cache): do the same to hit its compiled code.
         run_problem = problem.without_infos() if hasattr(problem, "without_infos") else problem
         out, solve_seconds = _timed_median(
-            args.log_repeats, lambda: jax.block_until_ready(_run(run_problem, layout, jnp.asarray(x0), solver, bounds, 1e-10, 1e-10, 400))
+            args.log_repeats, lambda: jax.block_until_ready(_run(run_problem, layout, jnp.asarray(x0), solver, bounds, None))
         )
-        assert np.allclose(np.asarray(out[0]), second.x, rtol=0, atol=1e-12), "the timed solve differs from fit_problem's"
+        assert np.allclose(np.asarray(out[0].value), second.x, rtol=0, atol=1e-12), "the timed solve differs from fit_problem's"
         # Compilation on its own (trace + lower + XLA compile, ahead of time): under load
         # first - second call is noisy, as both are dominated by the run.
         jax.clear_caches()  # else the lowering and compilation come from the cache
         start = time.perf_counter()
-        _run.lower(run_problem, layout, jnp.asarray(x0), solver, bounds, 1e-10, 1e-10, 400).compile()
+        _run.lower(run_problem, layout, jnp.asarray(x0), solver, bounds, None).compile()
         aot_seconds = time.perf_counter() - start
-        results[solver] = second
+        results[name] = second
         row = {
             "task": "log fit",
-            "method": f"hydrotact fit_problem({solver!r})",
+            "method": f"hydrotact fit_problem({name!r})",
             "first_call_s": first_seconds,
             "second_call_s": second_seconds,
             "compile_s": first_seconds - second_seconds,
@@ -273,7 +274,7 @@ def bench_log_fit(args, rows):
             "x": second.x.tolist(),
         }
         rows.append(row)
-        print(f"hydrotact {solver}: first {first_seconds:.2f} s, second {second_seconds:.2f} s, solve {row['solve_s']:.2f} s, AOT compile {aot_seconds:.2f} s, {second.num_steps} steps, chi2 {second.chi_square:.6f}, converged {second.converged}", flush=True)
+        print(f"hydrotact {name}: first {first_seconds:.2f} s, second {second_seconds:.2f} s, solve {row['solve_s']:.2f} s, AOT compile {aot_seconds:.2f} s, {second.num_steps} steps, chi2 {second.chi_square:.6f}, converged {second.converged}", flush=True)
 
     reference = results[args.solvers[0]]
     hydro = rows[0]

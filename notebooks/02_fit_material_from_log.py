@@ -279,7 +279,7 @@ plt.show()
 # leaves out.)
 
 # %%
-from hydrotact.sysid import fit_auto, make_fit_problem
+from hydrotact.sysid import fit_auto, make_fit_problem, make_solver
 
 start = time.perf_counter()
 problem = make_fit_problem([log], sources=[log_path.name])
@@ -290,12 +290,14 @@ print(f"unit responses: {time.perf_counter() - start:.1f} s; {problem.num_sample
 # **How many Prony terms?** More terms always fit better; the Bayesian information
 # criterion BIC = N ln(RSS/N) + P ln N charges each parameter ln N. `fit_auto` fits
 # 0, 1, ... terms (each from a linear fit on a grid of τ, then Levenberg–Marquardt) and
-# keeps the lowest BIC.
+# keeps the lowest BIC. The solver is an object holding its settings: `make_solver("lm")`
+# is the one `hydrotact fit --solver lm` uses; any optimistix least-squares solver or
+# minimiser works too (e.g. `optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8)`).
 
 # %%
 MAX_TERMS = 2 if SMOKE else 3
 start = time.perf_counter()
-result = fit_auto(problem, "lm", max_terms=MAX_TERMS)
+result = fit_auto(problem, make_solver("lm"), max_terms=MAX_TERMS)
 print(f"{MAX_TERMS + 1} fits in {time.perf_counter() - start:.1f} s")
 best = min(result.criteria.values())
 print(f"{'terms':>5}  {'BIC':>14}  {'ΔBIC':>10}")
@@ -497,7 +499,7 @@ print("prototype log columns:", ", ".join(prototype_log.columns))
 
 start = time.perf_counter()
 lumped_problem = make_fit_problem([prototype_log], mode="lumped", indentation="indentation", sources=[user_csv.name])
-lumped = fit_problem(lumped_problem, result.layout.num_terms, "lm")
+lumped = fit_problem(lumped_problem, result.layout.num_terms, make_solver("lm"))
 print(f"lumped fit: {time.perf_counter() - start:.1f} s, converged {lumped.converged}, reduced χ² {lumped.reduced_chi_square:.3f}")
 full_relative = [(m.value / result.long_term_modulus.value, t.value) for m, t in result.terms]
 print(f"{'':<10}{'truth':>10}{'full':>10}{'lumped':>14}")

@@ -16,12 +16,27 @@ import json
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import lineax as lx
 import numpy as np
+import optimistix as optx
 import pytest
 
 from hydrotact import HydrotactError
 from hydrotact.data import BarometerLog, read_material
-from hydrotact.sysid import fit_auto, fit_parameters, fit_problem, fit_relaxation_curve, make_fit_problem, make_initial_guess
+from hydrotact.sysid import (
+    SOLVERS,
+    BoundedLBFGSB,
+    GaussNewtonArmijo,
+    fit_auto,
+    fit_parameters,
+    fit_problem,
+    fit_relaxation_curve,
+    make_fit_problem,
+    make_initial_guess,
+    make_solver,
+    solve_least_squares,
+    solver_name,
+)
 from hydrotact.visco import make_prony
 from sysid_synthetic import FullLogMaker, make_lumped_log
 
@@ -76,7 +91,7 @@ def problem_3(maker_3):
 
 @pytest.fixture(scope="module")
 def result_3(problem_3):
-    return fit_problem(problem_3, 3, "lm")
+    return fit_problem(problem_3, 3)
 
 
 @pytest.fixture(scope="module")
@@ -99,7 +114,7 @@ def lumped_result():
     relative = make_prony(1.0, np.asarray(TRUTH_3["moduli"]) / TRUTH_3["long_term_modulus"], TRUTH_3["taus"])
     # A fourth channel the probe never reaches (amplitude 0): left out of the fit.
     log = make_lumped_log(relative, np.append(LUMPED_AMPLITUDES, 0.0), np.append(LUMPED_EXPONENTS, 1.0), duration=180.0, rate_hz=50.0, seed=5, holds=(2.0, 40.0))
-    return fit_problem(make_fit_problem([log], mode="lumped"), 3, "lm")
+    return fit_problem(make_fit_problem([log], mode="lumped"), 3, make_solver("lm"))
 
 
 # --- 1. known-truth recovery ------------------------------------------------------------
@@ -124,8 +139,8 @@ def test_logs_fit_jointly(maker_2, problem_2):
     other = FullLogMaker(_prony(TRUTH_2), duration=60.0, rate_hz=50.0, num_channels=4, trajectory_seed=11)
     other.gains = maker_2.gains  # the same barometers; offsets (ambient) differ per log
     logs = [maker_2.make(0), other.make(1)]
-    joint = fit_problem(make_fit_problem(logs, unit_responses=maker_2.unit_responses + other.unit_responses), 2, "lm")
-    alone = fit_problem(problem_2, 2, "lm")
+    joint = fit_problem(make_fit_problem(logs, unit_responses=maker_2.unit_responses + other.unit_responses), 2)
+    alone = fit_problem(problem_2, 2)
     assert joint.converged and 0.9 < joint.reduced_chi_square < 1.1
     assert len(joint.gains) == 4 and [len(offsets) for offsets in joint.offsets()] == [4, 4]
     for offsets, maker in zip(joint.offsets(), (maker_2, other)):
@@ -168,7 +183,7 @@ def test_one_sigma_coverage(maker_2, problem_2):
     with count_compilations() as compilations:
         for seed in range(COVERAGE_SEEDS):
             problem = make_fit_problem([maker_2.make(seed)], unit_responses=maker_2.unit_responses)
-            result = fit_problem(problem, 2, "lm")
+            result = fit_problem(problem, 2)
             assert result.converged, seed
             estimates = _material_estimates(result)
             values = np.array([e.value for e in estimates])
@@ -185,11 +200,12 @@ def test_one_sigma_coverage(maker_2, problem_2):
 
 
 def test_refit_of_same_shape_reuses_compiled_solve(maker_2, problem_2):
-    """A new log of the same shapes, through the public calls, compiles nothing."""
-    fit_problem(problem_2, 2, "lm")
+    """A new log of the same shapes, through the public calls, compiles nothing (a
+    new solver object with the same settings as the default included)."""
+    fit_problem(problem_2, 2)
     log = maker_2.make(1000)
     with count_compilations() as compilations:
-        fit_problem(make_fit_problem([log], unit_responses=maker_2.unit_responses), 2, "lm")
+        fit_problem(make_fit_problem([log], unit_responses=maker_2.unit_responses), 2, make_solver("lm"))
     assert not compilations, f"{len(compilations)} compilations"
 
 
@@ -205,16 +221,64 @@ def small_problem():
 
 @pytest.fixture(scope="module")
 def small_lm(small_problem):
-    return fit_problem(small_problem, 2, "lm")
+    """The default solver (Levenberg–Marquardt, SOLVERS["lm"])."""
+    return fit_problem(small_problem, 2)
 
 
-@pytest.mark.parametrize("solver", ["gn", "dogleg", "bfgs", "lbfgsb"])
-def test_solvers_reach_the_same_minimum(small_problem, small_lm, solver):
+@pytest.mark.parametrize(
+    ("solver", "name"),
+    [
+        (GaussNewtonArmijo(rtol=1e-10, atol=1e-10), "gn"),
+        (optx.Dogleg(rtol=1e-10, atol=1e-10), "dogleg"),
+        (optx.BFGS(rtol=1e-10, atol=1e-10), "bfgs"),
+        (BoundedLBFGSB(), "lbfgsb"),
+    ],
+    ids=["gn", "dogleg", "bfgs", "lbfgsb"],
+)
+def test_solvers_reach_the_same_minimum(small_problem, small_lm, solver, name):
+    """Solver objects of each kind (least squares, minimiser, bounded L-BFGS-B) reach
+    LM's minimum; those with the settings of a named choice report its name."""
     result = fit_problem(small_problem, 2, solver)
     assert small_lm.converged and result.converged
+    assert small_lm.result == optx.RESULTS.successful and result.result == optx.RESULTS.successful
+    assert (small_lm.solver_name, result.solver_name, result.solver) == ("lm", name, solver)
     assert abs(result.chi_square / small_lm.chi_square - 1.0) < 1e-6, (result.chi_square, small_lm.chi_square)
     for ours, reference in zip(_material_estimates(result), _material_estimates(small_lm)):
         assert abs(ours.value - reference.value) < 0.01 * reference.std
+
+
+def test_capped_fit_reports_its_result(small_problem):
+    """Capped at one step, fit_problem returns the max-steps code (throw=False, the
+    default) or raises a HydrotactError with its message (throw=True)."""
+    result = fit_problem(small_problem, 2, max_steps=1)
+    assert result.result == optx.RESULTS.nonlinear_max_steps_reached and not result.converged and result.num_steps == 1
+    with pytest.raises(HydrotactError) as error:
+        fit_problem(small_problem, 2, max_steps=1, throw=True)
+    _assert_one_line(error, "the lm solver failed after 1 steps", "maximum number of steps")
+
+
+def _rosenbrock(x, args):
+    """Rosenbrock's valley as residuals: the minimum 0 at (1, 1), far along a curved
+    valley from the usual start (−1.2, 1)."""
+    return jnp.stack([1.0 - x[0], 10.0 * (x[1] - x[0] ** 2)])
+
+
+@pytest.mark.parametrize("name", list(SOLVERS))
+def test_capped_solve_reports_its_result(name):
+    """solve_least_squares capped at one step: throw=False returns the max-steps
+    code; throw=True raises a HydrotactError with its message outside jit, and fails
+    when the computation runs under jit. Uncapped, each solver reaches (1, 1)."""
+    solver = make_solver(name)
+    x0 = jnp.array([-1.2, 1.0])
+    capped = solve_least_squares(_rosenbrock, x0, None, solver, max_steps=1, throw=False)
+    assert capped.result == optx.RESULTS.nonlinear_max_steps_reached and not capped.converged and int(capped.num_steps) == 1
+    with pytest.raises(HydrotactError, match=f"the {name} solver failed after 1 steps: The maximum number of steps"):
+        solve_least_squares(_rosenbrock, x0, None, solver, max_steps=1, throw=True)
+    with pytest.raises(eqx.EquinoxRuntimeError, match="maximum number of steps"):
+        jax.block_until_ready(eqx.filter_jit(lambda x: solve_least_squares(_rosenbrock, x, None, solver, max_steps=1).value)(x0))
+    solution = solve_least_squares(_rosenbrock, x0, None, solver)
+    assert solution.converged
+    np.testing.assert_allclose(solution.value, [1.0, 1.0], rtol=1e-6)
 
 
 # --- 4. the number of terms ------------------------------------------------------------------
@@ -224,7 +288,7 @@ def test_solvers_reach_the_same_minimum(small_problem, small_lm, solver):
 def test_fit_auto_picks_true_number_of_terms(case, request):
     problem, true_terms, max_terms = {"two terms": ("problem_2", 2, 3), "three terms": ("problem_3", 3, 4)}[case]
     problem = request.getfixturevalue(problem)
-    result = fit_auto(problem, "lm", max_terms=max_terms)
+    result = fit_auto(problem, max_terms=max_terms)
     assert sorted(result.criteria) == list(range(max_terms + 1))
     assert all(np.isfinite(v) for v in result.criteria.values())
     assert result.layout.num_terms == true_terms, result.criteria
@@ -266,11 +330,12 @@ def test_fit_parameters_gradient_matches_refits():
     layout, x0 = make_initial_guess(problem, 1)
     x0 = jnp.asarray(x0)
     direction = jnp.asarray(np.random.default_rng(0).normal(size=layout.size))
+    solver = optx.LevenbergMarquardt(rtol=1e-14, atol=1e-14, linear_solver=lx.Normal(lx.Cholesky()))
 
     @eqx.filter_jit
     def fitted(observed):
         swapped = eqx.tree_at(lambda p: p.logs[0].observed, problem, observed)
-        return direction @ fit_parameters(swapped, layout, x0, "lm", rtol=1e-14, atol=1e-14, max_steps=200)
+        return direction @ fit_parameters(swapped, layout, x0, solver, max_steps=200)
 
     observed = problem.logs[0].observed
     gradient = np.asarray(jax.grad(fitted)(observed))
@@ -399,12 +464,26 @@ def test_no_logs():
     _assert_one_line(error, "no logs")
 
 
-@pytest.mark.parametrize(("solver", "num_terms", "fragments"), [("newton", 1, ("unknown solver 'newton'", "lm", "lbfgsb")), ("lm", -1, ("0 or more", "-1"))])
+@pytest.mark.parametrize(
+    ("solver", "num_terms", "fragments"),
+    [("lm", 1, ("got str", "make_solver('lm')", "lbfgsb")), (object(), 1, ("got object",)), (None, -1, ("0 or more", "-1"))],
+    ids=["name", "object", "terms"],
+)
 def test_fit_problem_bad_arguments(tiny_maker, solver, num_terms, fragments):
     problem = make_fit_problem([tiny_maker.make(0)], unit_responses=tiny_maker.unit_responses)
     with pytest.raises(HydrotactError) as error:
         fit_problem(problem, num_terms, solver)
     _assert_one_line(error, *fragments)
+
+
+def test_make_solver():
+    """The named choices make the solvers they name; an unknown name lists them."""
+    for name in SOLVERS:
+        assert solver_name(make_solver(name)) == name
+    assert solver_name(optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8)) == "LevenbergMarquardt"
+    with pytest.raises(HydrotactError) as error:
+        make_solver("newton")
+    _assert_one_line(error, "unknown solver 'newton'", "lm, gn, dogleg, bfgs, lbfgsb")
 
 
 @pytest.mark.parametrize(("times", "modulus", "fragment"), [([0.0, 1.0, 2.0], [3.0, 2.0, 1.0], "at least 4"), ([0.0, 1.0, 2.0, 3.0], [3.0, 2.0, 0.0, 1.0], "positive moduli")])
@@ -449,6 +528,7 @@ def test_write_fit_outputs_full(result_3, tmp_path):
     covariance = material["covariance"]
     assert covariance["space"] == "log" and len(covariance["parameters"]) == 7
     assert report["mode"] == "full" and report["converged"]
+    assert report["solver"] == material["provenance"]["solver"] == "lm"  # the name, as before solvers were objects
 
 
 def test_write_fit_outputs_lumped(lumped_result, tmp_path):

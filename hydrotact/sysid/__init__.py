@@ -20,4 +20,12 @@ from ._report import (
     make_report as make_report,
     write_fit_outputs as write_fit_outputs,
 )
-from ._solve import SOLVERS as SOLVERS, solve_least_squares as solve_least_squares
+from ._solve import (
+    SOLVERS as SOLVERS,
+    BoundedLBFGSB as BoundedLBFGSB,
+    GaussNewtonArmijo as GaussNewtonArmijo,
+    LeastSquaresSolution as LeastSquaresSolution,
+    make_solver as make_solver,
+    solve_least_squares as solve_least_squares,
+    solver_name as solver_name,
+)

@@ -6,6 +6,10 @@ chi-square (the residuals are already divided by each channel's noise estimate);
 standard errors of positive parameters follow by the delta method (σ_E = E σ_log E).
 `fit_auto` fits 0..max_terms Prony terms and keeps the one with the lowest Bayesian
 information criterion, BIC = N ln(RSS/N) + P ln N.
+
+The solver is an object holding settings (see `_solve.py`; `make_solver("lm")` and
+the other names of SOLVERS are what the command line offers); a fit that stops before
+converging comes back with its `optimistix.RESULTS` code, or raises with `throw=True`.
 """
 
 import dataclasses
@@ -15,13 +19,14 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 
 from .._errors import HydrotactError
 from ..visco import Prony
 from ._initial import _MODULUS_FLOOR, design_block, fit_linear_moduli, make_tau_grid, merge_terms
 from ._model import ParameterLayout, calc_predictions, calc_residuals, make_layout, pack
 from ._problem import FitProblem
-from ._solve import SOLVERS, calc_jacobian, solve_least_squares
+from ._solve import BoundedLBFGSB, Solver, calc_jacobian, check_solver, raise_if_failed, solve_least_squares, solver_name
 
 MAX_AUTO_TERMS = 4
 
@@ -56,8 +61,10 @@ class FitResult:
 
     **Fields:** `problem`, `layout`; `x` the solution (flat, log space for positive
     parameters) and `names`; `covariance` of x; `chi_square` Σ r², `dof` N − P,
-    `num_residuals` N; `num_steps`, `converged`, `solver`, `seconds` (including
-    compilation); `criteria` {num_terms: BIC} when the number of terms was chosen.
+    `num_residuals` N; `num_steps`; `result` the solver's `optimistix.RESULTS` code
+    (`converged` when successful); `solver` the solver object and `solver_name` its
+    name in SOLVERS (or its class name); `seconds` (including compilation);
+    `criteria` {num_terms: BIC} when the number of terms was chosen.
     """
 
     problem: FitProblem
@@ -68,10 +75,15 @@ class FitResult:
     chi_square: float
     num_residuals: int
     num_steps: int
-    converged: bool
-    solver: str
+    result: optx.RESULTS
+    solver: Solver
+    solver_name: str
     seconds: float
     criteria: dict = dataclasses.field(default_factory=dict)
+
+    @property
+    def converged(self) -> bool:
+        return bool(self.result == optx.RESULTS.successful)
 
     @property
     def dof(self) -> int:
@@ -170,19 +182,25 @@ def _residual_fn(layout):
 
 
 @eqx.filter_jit
-def _run(problem: FitProblem, layout: ParameterLayout, x0, solver: str, bounds, rtol: float, atol: float, max_steps: int):
+def _run(problem: FitProblem, layout: ParameterLayout, x0, solver: Solver, bounds, max_steps: int | None):
+    """The solution (never raising), χ² and the normal matrix JᵀJ at it."""
     residual_fn = _residual_fn(layout)
-    x, steps, converged = solve_least_squares(residual_fn, x0, problem, solver, rtol=rtol, atol=atol, max_steps=max_steps, bounds=bounds)
-    residuals = residual_fn(x, problem)
-    jacobian = calc_jacobian(residual_fn, x, problem)
-    return x, steps, converged, jnp.sum(residuals**2), jacobian.T @ jacobian
+    solution = solve_least_squares(residual_fn, x0, problem, solver, max_steps=max_steps, bounds=bounds, throw=False)
+    residuals = residual_fn(solution.value, problem)
+    jacobian = calc_jacobian(residual_fn, solution.value, problem)
+    return solution, jnp.sum(residuals**2), jacobian.T @ jacobian
 
 
-def fit_parameters(problem: FitProblem, layout: ParameterLayout, x0, solver: str = "lm", rtol: float = 1e-10, atol: float = 1e-10, max_steps: int = 400):
+def fit_parameters(problem: FitProblem, layout: ParameterLayout, x0, solver: Solver | None = None, *, max_steps: int | None = None, throw: bool = True):
     """The fitted x alone (pure): differentiable in the problem's data through the
-    implicit function theorem (for the optimistix solvers)."""
-    x, _, _ = solve_least_squares(_residual_fn(layout), x0, problem, solver, rtol=rtol, atol=atol, max_steps=max_steps)
-    return x
+    implicit function theorem (for the optimistix solvers).
+
+    **Arguments:** `solver` a solver object (None: Levenberg–Marquardt); `max_steps`
+    the step cap (None: the solver's default); `throw` fail, rather than return the
+    last iterate, when the solve does not converge (an error when the computation
+    runs, under jit).
+    """
+    return solve_least_squares(_residual_fn(layout), x0, problem, solver, max_steps=max_steps, throw=throw).value
 
 
 def make_initial_guess(problem: FitProblem, num_terms: int) -> tuple[ParameterLayout, np.ndarray]:
@@ -242,39 +260,49 @@ def _bounds(problem: FitProblem, layout: ParameterLayout, x0: np.ndarray):
     return jnp.asarray(lower), jnp.asarray(upper)
 
 
-def fit_problem(problem: FitProblem, num_terms: int, solver: str = "lm", *, rtol: float = 1e-10, atol: float = 1e-10, max_steps: int = 400) -> FitResult:
-    """Fit `num_terms` Prony terms (with gains and offsets) to the problem (host)."""
-    if solver not in SOLVERS:
-        raise HydrotactError(f"unknown solver {solver!r}; use one of {', '.join(SOLVERS)}")
+def fit_problem(problem: FitProblem, num_terms: int, solver: Solver | None = None, *, max_steps: int | None = None, throw: bool = False) -> FitResult:
+    """Fit `num_terms` Prony terms (with gains and offsets) to the problem (host).
+
+    **Arguments:** `solver` a solver object (None: Levenberg–Marquardt; BoundedLBFGSB
+    gets box bounds on τ, moduli and gains); `max_steps` the step cap (None: the
+    solver's default); `throw` raise a HydrotactError with the result's message if
+    the solve does not converge (else the result says so: `result`, `converged`).
+    """
+    solver = check_solver(solver)
     if int(num_terms) < 0:
         raise HydrotactError(f"the number of Prony terms must be 0 or more, got {num_terms}")
     start = time.perf_counter()
     layout, x0 = make_initial_guess(problem, int(num_terms))
-    bounds = _bounds(problem, layout, x0) if solver == "lbfgsb" else None
-    x, steps, converged, chi_square, normal = _run(problem.without_infos(), layout, jnp.asarray(x0), solver, bounds, rtol, atol, max_steps)
+    bounds = _bounds(problem, layout, x0) if isinstance(solver, BoundedLBFGSB) else None
+    solution, chi_square, normal = _run(problem.without_infos(), layout, jnp.asarray(x0), solver, bounds, max_steps)
+    if throw:
+        raise_if_failed(solution, solver)
     num_residuals = problem.num_samples
     covariance = calc_covariance(float(chi_square), np.asarray(normal), num_residuals)
     return FitResult(
         problem=problem,
         layout=layout,
-        x=np.asarray(x),
+        x=np.asarray(solution.value),
         names=layout.names(problem),
         covariance=covariance,
         chi_square=float(chi_square),
         num_residuals=num_residuals,
-        num_steps=int(steps),
-        converged=bool(converged),
+        num_steps=int(solution.num_steps),
+        result=solution.result,
         solver=solver,
+        solver_name=solver_name(solver),
         seconds=time.perf_counter() - start,
     )
 
 
-def fit_auto(problem: FitProblem, solver: str = "lm", max_terms: int = MAX_AUTO_TERMS, progress=None, **options) -> FitResult:
+def fit_auto(problem: FitProblem, solver: Solver | None = None, max_terms: int = MAX_AUTO_TERMS, progress=None, *, max_steps: int | None = None, throw: bool = False) -> FitResult:
     """Fit 0..max_terms Prony terms; keep the lowest BIC. `progress(k)` is called
-    after each fit, if given."""
+    after each fit, if given; `solver`, `max_steps` and `throw` as for
+    :func:`fit_problem` (with `throw`, any of the fits failing raises)."""
+    solver = check_solver(solver)
     results = {}
     for num_terms in range(max_terms + 1):
-        results[num_terms] = fit_problem(problem, num_terms, solver, **options)
+        results[num_terms] = fit_problem(problem, num_terms, solver, max_steps=max_steps, throw=throw)
         if progress is not None:
             progress(num_terms)
     criteria = {k: result.bic for k, result in results.items()}

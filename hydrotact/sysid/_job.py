@@ -15,7 +15,7 @@ from ..data import LogWarning, read_log, tare_log
 from ._fit import MAX_AUTO_TERMS, fit_auto, fit_problem
 from ._problem import make_fit_problem
 from ._report import write_fit_outputs
-from ._solve import SOLVERS
+from ._solve import make_solver, solver_name
 
 
 def parse_terms(text) -> int | str:
@@ -48,21 +48,23 @@ def read_logs(paths, mapping=None, sensor=None, report_warning=None):
     return logs
 
 
-def fit_logs(paths, output, *, sensor=None, lumped=False, indentation="indentation", mapping=None, terms="auto", solver="lm", tare=False, field=None, num_rays=None, progress=True, report_warning=None, plot=None) -> dict:
+def fit_logs(paths, output, *, sensor=None, lumped=False, indentation="indentation", mapping=None, terms="auto", solver=None, tare=False, field=None, num_rays=None, progress=True, report_warning=None, plot=None) -> dict:
     """Fit the logs at `paths` and write material.json, report.json (and, with `plot`,
     the pictures) into `output`. With `tare`, each log is first tared on its no-load
     segments (found automatically; the baseline interpolated in time between them),
     which takes out the slow drift of aged sensors that constant offsets cannot.
     `plot(result, output) -> {name: path}` draws the pictures (the command line passes
-    `hydrotact.viz.plot_fit`; the stage draws nothing itself). Returns the report
-    (with `files`)."""
+    `hydrotact.viz.plot_fit`; the stage draws nothing itself). `solver` is a solver
+    object (default: Levenberg–Marquardt) or the name of one of SOLVERS. Returns the
+    report (with `files`)."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     output = Path(output)
     if output.exists() and not output.is_dir():
         raise HydrotactError(f"{output}: exists and is not a folder; -o names the folder the fit writes into")
-    if solver not in SOLVERS:
-        raise HydrotactError(f"--solver: unknown solver {solver!r}; use one of {', '.join(SOLVERS)}")
+    if solver is None or isinstance(solver, str):
+        solver = make_solver(solver or "lm")
+    name = solver_name(solver)
     terms = parse_terms(terms)
     logs = read_logs([Path(p) for p in paths], mapping, sensor, report_warning)
     if tare:
@@ -71,14 +73,14 @@ def fit_logs(paths, output, *, sensor=None, lumped=False, indentation="indentati
     problem = make_fit_problem(logs, mode=mode, indentation=indentation, field=field, num_rays=num_rays, sources=[str(p) for p in paths], progress=progress)
     counts = list(range(MAX_AUTO_TERMS + 1)) if terms == "auto" else [terms]
     with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} fits"), TimeElapsedColumn(), transient=True, disable=not progress) as bar:
-        task = bar.add_task(f"fitting ({solver})", total=len(counts))
+        task = bar.add_task(f"fitting ({name})", total=len(counts))
         if terms == "auto":
-            result = fit_auto(problem, solver, progress=lambda k: bar.update(task, advance=1, description=f"fitting ({solver}): {k} terms done"))
+            result = fit_auto(problem, solver, progress=lambda k: bar.update(task, advance=1, description=f"fitting ({name}): {k} terms done"))
         else:
             result = fit_problem(problem, terms, solver)
             bar.update(task, advance=1)
     if not result.converged:
-        message = f"the {solver} solver stopped before converging ({result.num_steps} steps); the numbers below are its last iterate"
+        message = f"the {name} solver stopped before converging ({result.num_steps} steps); the numbers below are its last iterate"
         if report_warning is not None:
             report_warning(message)
     report = write_fit_outputs(result, output, paths=[str(p) for p in paths], plot=plot)

@@ -12,26 +12,32 @@ import time
 
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 
 from .._errors import HydrotactError
 from ..visco import Prony
 from ._fit import MAX_AUTO_TERMS, Estimate, calc_bic, calc_covariance
 from ._initial import _MODULUS_FLOOR, fit_linear_moduli, merge_terms
-from ._solve import SOLVERS, calc_jacobian, solve_least_squares
+from ._solve import Solver, calc_jacobian, check_solver, solve_least_squares
 
 
 @dataclasses.dataclass(frozen=True)
 class RelaxationFit:
     """A Prony series fitted to E(t): estimates, covariance of the log parameters
-    [log E∞, log E₁.., log τ₁..], RMS residual (Pa), BIC and the time taken."""
+    [log E∞, log E₁.., log τ₁..], RMS residual (Pa), BIC, the solver's
+    `optimistix.RESULTS` code (`converged` when successful) and the time taken."""
 
     long_term_modulus: Estimate
     terms: list
     covariance: np.ndarray
     residual_rms: float
     bic: float
-    converged: bool
+    result: optx.RESULTS
     seconds: float
+
+    @property
+    def converged(self) -> bool:
+        return bool(self.result == optx.RESULTS.successful)
 
     @property
     def prony(self) -> Prony:
@@ -45,20 +51,21 @@ def _residuals(x, data):
     return (modulus - prony.calc_relaxation_modulus(times)) * weights
 
 
-def fit_relaxation_curve(times, modulus, num_terms="auto", solver: str = "lm", max_terms: int = MAX_AUTO_TERMS) -> RelaxationFit:
+def fit_relaxation_curve(times, modulus, num_terms="auto", solver: Solver | None = None, max_terms: int = MAX_AUTO_TERMS, *, throw: bool = False) -> RelaxationFit:
     """Fit E(t) = E∞ + Σ Eᵢ exp(−t/τᵢ) to samples (times s, modulus Pa) (host).
 
-    `num_terms` an integer or "auto" (the lowest BIC over 0..max_terms)."""
+    `num_terms` an integer or "auto" (the lowest BIC over 0..max_terms); `solver` a
+    solver object (None: Levenberg–Marquardt); `throw` raise a HydrotactError if a
+    solve does not converge (else the result says so)."""
     times = np.asarray(times, dtype=np.float64)
     modulus = np.asarray(modulus, dtype=np.float64)
     if times.ndim != 1 or times.shape != modulus.shape or len(times) < 4:
         raise HydrotactError(f"a relaxation curve needs matching 1-D times and moduli (at least 4), got {times.shape} and {modulus.shape}")
     if not (np.all(np.isfinite(times)) and np.all(np.isfinite(modulus))) or np.any(modulus <= 0.0) or np.any(times < 0.0):
         raise HydrotactError("a relaxation curve needs finite times ≥ 0 and positive moduli")
-    if solver not in SOLVERS:
-        raise HydrotactError(f"unknown solver {solver!r}; use one of {', '.join(SOLVERS)}")
+    solver = check_solver(solver)
     if num_terms == "auto":
-        fits = [fit_relaxation_curve(times, modulus, k, solver) for k in range(max_terms + 1)]
+        fits = [fit_relaxation_curve(times, modulus, k, solver, throw=throw) for k in range(max_terms + 1)]
         return min(fits, key=lambda fit: fit.bic)
     start = time.perf_counter()
     order = np.argsort(times)
@@ -74,7 +81,8 @@ def fit_relaxation_curve(times, modulus, num_terms="auto", solver: str = "lm", m
     taus, term_moduli = merge_terms(grid, moduli[1:], int(num_terms), floor)
     x0 = np.concatenate([[np.log(max(moduli[0], floor))], np.log(term_moduli), np.log(taus)])
     data = (jnp.asarray(times), jnp.asarray(modulus), jnp.asarray(weights))
-    x, _, converged = solve_least_squares(_residuals, jnp.asarray(x0), data, solver)
+    solution = solve_least_squares(_residuals, jnp.asarray(x0), data, solver, throw=throw)
+    x = solution.value
     residuals = np.asarray(_residuals(x, data))
     jacobian = np.asarray(calc_jacobian(_residuals, x, data))
     chi_square = float(np.sum(residuals**2))
@@ -91,6 +99,6 @@ def fit_relaxation_curve(times, modulus, num_terms="auto", solver: str = "lm", m
         covariance=covariance,
         residual_rms=float(np.sqrt(np.mean((modulus - fitted) ** 2))),
         bic=calc_bic(chi_square, n, p),
-        converged=bool(converged),
+        result=solution.result,
         seconds=time.perf_counter() - start,
     )

@@ -51,7 +51,7 @@ def make_fit_material(result: FitResult, paths=(), name: str | None = None) -> d
     provenance = {
         "method": "fit",
         "mode": result.problem.mode,
-        "solver": result.solver,
+        "solver": result.solver_name,
         "logs": [{"path": str(path), **({"sha256": info.sha256} if info.sha256 else {})} for path, info in zip(paths or [i.source for i in result.problem.infos], result.problem.infos)],
         "num_samples": int(sum(int(log.times.shape[0]) for log in result.problem.logs)),
         "cost": 0.5 * result.chi_square,
@@ -69,7 +69,7 @@ def make_fit_material(result: FitResult, paths=(), name: str | None = None) -> d
         channels=channels or None,
         provenance=provenance,
         name=name,
-        description=f"Fitted by hydrotact {__version__} ({result.problem.mode} mode, {count} Prony terms, solver {result.solver}).",
+        description=f"Fitted by hydrotact {__version__} ({result.problem.mode} mode, {count} Prony terms, solver {result.solver_name}).",
     )
     if not result.layout.has_long_term:
         document["modulus_scale"] = "relative"
@@ -81,7 +81,7 @@ def make_report(result: FitResult) -> dict:
     report = {
         "generator": f"hydrotact {__version__}",
         "mode": result.problem.mode,
-        "solver": result.solver,
+        "solver": result.solver_name,
         "num_terms": result.layout.num_terms,
         "converged": result.converged,
         "num_steps": result.num_steps,

@@ -1,15 +1,25 @@
 """The solvers a fit can use, behind one call (pure, jittable).
 
-Least squares with optimistix (Levenberg–Marquardt by default; Gauss–Newton with a
-backtracking line search, Dogleg),
-or minimisation of ½‖r‖² with optimistix's BFGS or jaxopt's bounded L-BFGS-B. The
-optimistix solutions are differentiable in the data through the implicit function
-theorem (`optimistix.ImplicitAdjoint`).
+A solver is an object holding settings only, and its type picks the method:
+any `optimistix.AbstractLeastSquaresSolver` minimises ½‖r‖² with the residuals
+(Levenberg–Marquardt by default; Gauss–Newton with a backtracking line search,
+Dogleg), any `optimistix.AbstractMinimiser` (e.g. BFGS) minimises ½‖r‖² as a scalar,
+and :class:`BoundedLBFGSB` runs jaxopt's bounded L-BFGS-B. The optimistix solutions
+are differentiable in the data through the implicit function theorem
+(`optimistix.ImplicitAdjoint`). Failures come back as an `optimistix.RESULTS` code in
+the solution, or as an error with `throw=True`.
+
+`SOLVERS` names the choices the command line offers (`hydrotact fit --solver`);
+`solver_name` gives a solver's name back for the report.
 """
 
+import functools
+import types
 import warnings
 from collections.abc import Callable
+from typing import TypeAlias
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 
@@ -19,7 +29,8 @@ with warnings.catch_warnings():  # jaxopt (in maintenance) warns on import that 
 import lineax as lx
 import optimistix as optx
 
-SOLVERS = ("lm", "gn", "dogleg", "bfgs", "lbfgsb")
+from .._errors import HydrotactError
+from .._types import Array, Float, Int
 
 
 def _quiet(**_) -> None:
@@ -40,35 +51,156 @@ class GaussNewtonArmijo(optx.AbstractGaussNewton):
     verbose: Callable = _quiet
 
 
-def solve_least_squares(residual_fn, x0, args, solver: str = "lm", *, rtol: float = 1e-10, atol: float = 1e-10, max_steps: int = 400, bounds=None):
+class BoundedLBFGSB(eqx.Module):
+    """Settings for jaxopt's L-BFGS-B on ½‖r‖² (scaled by its value at the start,
+    when above 1), the one solver that takes box bounds.
+
+    **Fields:** `tol` the stopping tolerance on the projected gradient's norm (of the
+    scaled loss); `history_size` the number of (step, gradient change) pairs kept for
+    the inverse-Hessian estimate.
+    """
+
+    tol: float = 1e-10
+    history_size: int = 10
+
+    def __check_init__(self):
+        if not self.tol > 0.0:
+            raise HydrotactError(f"BoundedLBFGSB: tol must be positive, got {self.tol}")
+        if int(self.history_size) < 1:
+            raise HydrotactError(f"BoundedLBFGSB: history_size must be 1 or more, got {self.history_size}")
+
+
+Solver: TypeAlias = optx.AbstractLeastSquaresSolver | optx.AbstractMinimiser | BoundedLBFGSB
+
+_TOLERANCE = 1e-10
+
+SOLVERS: types.MappingProxyType[str, Callable[[], Solver]] = types.MappingProxyType(
+    {
+        # The damped normal equations are positive definite: Cholesky on JᵀJ + λI is
+        # several times faster than QR of the tall Jacobian (many samples, few
+        # parameters) and accurate enough for a step.
+        "lm": functools.partial(optx.LevenbergMarquardt, rtol=_TOLERANCE, atol=_TOLERANCE, linear_solver=lx.Normal(lx.Cholesky())),
+        "gn": functools.partial(GaussNewtonArmijo, rtol=_TOLERANCE, atol=_TOLERANCE),
+        "dogleg": functools.partial(optx.Dogleg, rtol=_TOLERANCE, atol=_TOLERANCE),
+        "bfgs": functools.partial(optx.BFGS, rtol=_TOLERANCE, atol=_TOLERANCE),
+        "lbfgsb": functools.partial(BoundedLBFGSB, tol=_TOLERANCE),
+    }
+)
+"""The named solvers (name -> a function making one, settings as `hydrotact fit` uses
+them): "lm" Levenberg–Marquardt (the default), "gn" Gauss–Newton with a line search,
+"dogleg", "bfgs" (minimising ½‖r‖²) and "lbfgsb" (bounded)."""
+
+
+def make_solver(name: str) -> Solver:
+    """The solver named `name` in SOLVERS; a HydrotactError naming the choices if
+    there is none."""
+    try:
+        return SOLVERS[name]()
+    except (KeyError, TypeError):
+        raise HydrotactError(f"unknown solver {name!r}; use one of {', '.join(SOLVERS)}") from None
+
+
+def solver_name(solver: Solver) -> str:
+    """The SOLVERS name of a solver with that choice's settings exactly, else its
+    class name (e.g. "LevenbergMarquardt" with other tolerances)."""
+    for name, make in SOLVERS.items():
+        candidate = make()
+        if type(candidate) is type(solver) and eqx.tree_equal(candidate, solver) is True:
+            return name
+    return type(solver).__name__
+
+
+def check_solver(solver) -> Solver:
+    """The solver, or the default (Levenberg–Marquardt) for None; a HydrotactError
+    for anything that is not a solver object (a name included)."""
+    if solver is None:
+        return SOLVERS["lm"]()
+    if not isinstance(solver, (optx.AbstractLeastSquaresSolver, optx.AbstractMinimiser, BoundedLBFGSB)):
+        hint = f"; for a named one use make_solver({solver!r}) (one of {', '.join(SOLVERS)})" if isinstance(solver, str) else ""
+        raise HydrotactError(f"solver: expected an optimistix least-squares solver or minimiser, or BoundedLBFGSB, got {type(solver).__name__}{hint}")
+    return solver
+
+
+def default_max_steps(solver: Solver) -> int:
+    """The step cap when none is given: 400 for least-squares solvers, 4000 for the
+    minimisers (each of their steps uses one gradient, not a Jacobian)."""
+    return 400 if isinstance(solver, optx.AbstractLeastSquaresSolver) else 4000
+
+
+class LeastSquaresSolution(eqx.Module):
+    """The outcome of :func:`solve_least_squares`.
+
+    **Fields:** `value` the last iterate, like x0; `result` an `optimistix.RESULTS`
+    code (`successful`; `nonlinear_max_steps_reached` when the cap stopped the solve;
+    `optimistix.RESULTS[result]` is its message); `num_steps` the steps taken.
+    """
+
+    value: Float[Array, " num_parameters"]
+    result: optx.RESULTS
+    num_steps: Int[Array, ""]
+
+    @property
+    def converged(self):
+        """Whether the solve met its tolerances (a boolean array)."""
+        return self.result == optx.RESULTS.successful
+
+
+def _half_squared_norm(residual_fn):
+    return lambda x, args: 0.5 * jnp.sum(residual_fn(x, args) ** 2)
+
+
+def _solve_lbfgsb(residual_fn, x0, args, solver: BoundedLBFGSB, max_steps: int, bounds) -> LeastSquaresSolution:
+    loss = _half_squared_norm(residual_fn)
+    lower, upper = bounds if bounds is not None else (jnp.full_like(x0, -jnp.inf), jnp.full_like(x0, jnp.inf))
+    scale = jnp.maximum(loss(x0, args), 1.0)
+    optimiser = jaxopt.LBFGSB(fun=lambda x: loss(x, args) / scale, maxiter=max_steps, tol=solver.tol, history_size=solver.history_size, implicit_diff=False)
+    value, state = optimiser.run(jnp.clip(x0, lower, upper), bounds=(lower, upper))
+    # jaxopt stops when the error is within tol or at maxiter (a NaN error stops it too).
+    stopped = optx.RESULTS.where(jnp.isfinite(state.error), optx.RESULTS.nonlinear_max_steps_reached, optx.RESULTS.nonfinite)
+    result = optx.RESULTS.where(state.error <= solver.tol, optx.RESULTS.successful, stopped)
+    return LeastSquaresSolution(value, result, jnp.asarray(state.iter_num))
+
+
+def _is_traced(tree) -> bool:
+    return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(tree))
+
+
+def raise_if_failed(solution: LeastSquaresSolution, solver: Solver) -> LeastSquaresSolution:
+    """The solution, if it converged; else a HydrotactError with the result's message
+    (outside jit), or a runtime error when the traced computation runs (inside jit,
+    `equinox.error_if`)."""
+    if _is_traced(solution):
+        return eqx.tree_at(lambda s: s.value, solution, solution.result.error_if(solution.value, ~solution.converged))
+    if not bool(solution.converged):
+        message = optx.RESULTS[solution.result]
+        raise HydrotactError(f"the {solver_name(solver)} solver failed after {int(solution.num_steps)} steps: {message}")
+    return solution
+
+
+def solve_least_squares(residual_fn, x0, args, solver: Solver | None = None, *, max_steps: int | None = None, bounds=None, throw: bool = True) -> LeastSquaresSolution:
     """Minimise ½‖residual_fn(x, args)‖² from x0.
 
-    **Arguments:** `solver` one of SOLVERS; `bounds` (lower, upper) arrays like x, used
-    by "lbfgsb" only (the others are unbounded: positive parameters are logarithms).
+    **Arguments:** `solver` a solver object (see the module docstring; None is
+    SOLVERS["lm"]); `max_steps` the step cap (None: :func:`default_max_steps`);
+    `bounds` (lower, upper) arrays like x, for BoundedLBFGSB only (the others are
+    unbounded: positive parameters are logarithms); `throw` raise if the solve fails
+    (see :func:`raise_if_failed`) rather than only report it in the result code.
 
-    **Returns:** (x, number of steps, converged flag).
+    **Returns:** a :class:`LeastSquaresSolution`.
     """
-    if solver in ("lm", "gn", "dogleg"):
-        if solver == "lm":
-            # The damped normal equations are positive definite: Cholesky on JᵀJ + λI is
-            # several times faster than QR of the tall Jacobian (many samples, few
-            # parameters) and accurate enough for a step.
-            method = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.Normal(lx.Cholesky()))
-        else:
-            method = {"gn": GaussNewtonArmijo, "dogleg": optx.Dogleg}[solver](rtol=rtol, atol=atol)
-        solution = optx.least_squares(residual_fn, method, x0, args, max_steps=max_steps, throw=False)
-        return solution.value, solution.stats["num_steps"], solution.result == optx.RESULTS.successful
-    loss = lambda x, args: 0.5 * jnp.sum(residual_fn(x, args) ** 2)  # noqa: E731
-    if solver == "bfgs":
-        solution = optx.minimise(loss, optx.BFGS(rtol=rtol, atol=atol), x0, args, max_steps=max_steps * 10, throw=False)
-        return solution.value, solution.stats["num_steps"], solution.result == optx.RESULTS.successful
-    if solver == "lbfgsb":
-        lower, upper = bounds if bounds is not None else (jnp.full_like(x0, -jnp.inf), jnp.full_like(x0, jnp.inf))
-        scale = jnp.maximum(loss(x0, args), 1.0)
-        optimiser = jaxopt.LBFGSB(fun=lambda x: loss(x, args) / scale, maxiter=max_steps * 10, tol=atol, implicit_diff=False)
-        value, state = optimiser.run(jnp.clip(x0, lower, upper), bounds=(lower, upper))
-        return value, state.iter_num, state.error <= atol
-    raise ValueError(f"unknown solver {solver!r}; use one of {', '.join(SOLVERS)}")
+    solver = check_solver(solver)
+    max_steps = default_max_steps(solver) if max_steps is None else int(max_steps)
+    if bounds is not None and not isinstance(solver, BoundedLBFGSB):
+        raise HydrotactError(f"bounds: only BoundedLBFGSB takes bounds, not {type(solver).__name__}")
+    if isinstance(solver, optx.AbstractLeastSquaresSolver):
+        solution = optx.least_squares(residual_fn, solver, x0, args, max_steps=max_steps, throw=False)
+        solution = LeastSquaresSolution(solution.value, solution.result, solution.stats["num_steps"])
+    elif isinstance(solver, optx.AbstractMinimiser):
+        solution = optx.minimise(_half_squared_norm(residual_fn), solver, x0, args, max_steps=max_steps, throw=False)
+        solution = LeastSquaresSolution(solution.value, solution.result, solution.stats["num_steps"])
+    else:
+        solution = _solve_lbfgsb(residual_fn, x0, args, solver, max_steps, bounds)
+    return raise_if_failed(solution, solver) if throw else solution
 
 
 def calc_jacobian(residual_fn, x, args):
