@@ -2,6 +2,7 @@
 
 import os
 import platform
+from pathlib import Path
 
 
 def describe_machine() -> dict:
@@ -27,7 +28,7 @@ def describe_machine() -> dict:
     }
 
 
-def write_results(name: str, machine: dict, rows: list) -> "Path":
+def write_results(name: str, machine: dict, rows: list) -> Path:
     """Write benchmarks/results/NAME-BACKEND.json ({machine, rows}) and return its path."""
     import json
     from pathlib import Path

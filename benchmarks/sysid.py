@@ -245,7 +245,7 @@ def bench_log_fit(args, rows):
         # do not key the compilation cache): do the same to hit its compiled code.
         run_problem = problem.without_infos() if hasattr(problem, "without_infos") else problem
         out, solve_seconds = _timed_median(
-            args.log_repeats, lambda: jax.block_until_ready(_run(run_problem, layout, jnp.asarray(x0), solver, bounds, None))
+            args.log_repeats, lambda run_problem=run_problem, solver=solver, bounds=bounds: jax.block_until_ready(_run(run_problem, layout, jnp.asarray(x0), solver, bounds, None))
         )
         assert np.allclose(np.asarray(out[0].value), second.x, rtol=0, atol=1e-12), "the timed solve differs from fit_problem's"
         # Compilation on its own (trace + lower + XLA compile, ahead of time): under load
@@ -274,7 +274,11 @@ def bench_log_fit(args, rows):
             "x": second.x.tolist(),
         }
         rows.append(row)
-        print(f"hydrotact {name}: first {first_seconds:.2f} s, second {second_seconds:.2f} s, solve {row['solve_s']:.2f} s, AOT compile {aot_seconds:.2f} s, {second.num_steps} steps, chi2 {second.chi_square:.6f}, converged {second.converged}", flush=True)
+        print(
+            f"hydrotact {name}: first {first_seconds:.2f} s, second {second_seconds:.2f} s, solve {row['solve_s']:.2f} s, AOT compile {aot_seconds:.2f} s, "
+            f"{second.num_steps} steps, chi2 {second.chi_square:.6f}, converged {second.converged}",
+            flush=True,
+        )
 
     reference = results[args.solvers[0]]
     hydro = rows[0]
@@ -315,7 +319,11 @@ def bench_log_fit(args, rows):
             "x": solution.x.tolist(),
         }
         rows.append(row)
-        print(f"scipy {method}: {seconds:.2f} s, {residual.evaluations} residual evaluations, chi2 {chi_square:.6f} (rel. to hydrotact {relative:+.1e}), max |d log material| {x_difference:.1e}", flush=True)
+        print(
+            f"scipy {method}: {seconds:.2f} s, {residual.evaluations} residual evaluations, chi2 {chi_square:.6f} (rel. to hydrotact {relative:+.1e}), max "
+            f"|d log material| {x_difference:.1e}",
+            flush=True,
+        )
         if abs(relative) > 1e-6:
             print(f"WARNING: scipy {method} and hydrotact reach different chi-squares ({relative:+.1e} relative)", flush=True)
 
@@ -365,15 +373,26 @@ def print_tables(rows):
     base = log_rows[0]
     print(f"\nchi2 at the true parameters: {truth['chi_square']:.1f} ({truth['num_residuals']} residuals)")
     print("\nLog fit:")
-    print("| method | first call | second call | compile (1st - 2nd) | compile (AOT) | solve only | steps / evaluations | chi2 / truth's | chi2 rel. to hydrotact LM | solve ratio (x / hydrotact LM solve) | total vs 2nd call | total vs 1st call |")
+    print(
+        "| method | first call | second call | compile (1st - 2nd) | compile (AOT) | solve only | steps / evaluations | chi2 / truth's | chi2 rel. to "
+        "hydrotact LM | solve ratio (x / hydrotact LM solve) | total vs 2nd call | total vs 1st call |"
+    )
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for row in log_rows:
         vs_truth = row["chi_square"] / truth["chi_square"]
         if row["method"].startswith("hydrotact"):
             rel = row["chi_square"] / base["chi_square"] - 1.0
-            print(f"| {row['method']} | {_fmt_time(row['first_call_s'])} | {_fmt_time(row['second_call_s'])} | {_fmt_time(row['compile_s'])} | {_fmt_time(row['compile_aot_s'])} | {_fmt_time(row['solve_s'])} | {row['steps']} steps | {vs_truth:.4f} | {rel:+.1e} | {row['solve_s'] / base['solve_s']:.2f} | - | - |")
+            print(
+                f"| {row['method']} | {_fmt_time(row['first_call_s'])} | {_fmt_time(row['second_call_s'])} | {_fmt_time(row['compile_s'])} | "
+                f"{_fmt_time(row['compile_aot_s'])} | {_fmt_time(row['solve_s'])} | {row['steps']} steps | {vs_truth:.4f} | {rel:+.1e} | "
+                f"{row['solve_s'] / base['solve_s']:.2f} | - | - |"
+            )
         else:
-            print(f"| {row['method']} | - | - | - | - | {_fmt_time(row['solve_s'])} | {row['evaluations']} evals | {vs_truth:.4f} | {row['chi_square_vs_hydrotact']:+.1e} | {row['ratio_vs_solve']:.2f} | {row['ratio_total_vs_second_call']:.2f} | {row['ratio_total_vs_first_call']:.2f} |")
+            print(
+                f"| {row['method']} | - | - | - | - | {_fmt_time(row['solve_s'])} | {row['evaluations']} evals | {vs_truth:.4f} | "
+                f"{row['chi_square_vs_hydrotact']:+.1e} | {row['ratio_vs_solve']:.2f} | {row['ratio_total_vs_second_call']:.2f} | "
+                f"{row['ratio_total_vs_first_call']:.2f} |"
+            )
     print("\nParameter relative errors (vs truth):")
     print("| task | method | E_inf | E_1 | tau_1 | E_2 | tau_2 | E_3 | tau_3 | max gain err / RMS residual |")
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
@@ -390,7 +409,10 @@ def print_tables(rows):
         for row in relax:
             ratio2 = f"{row['ratio_vs_second_call']:.2f}" if "ratio_vs_second_call" in row else "-"
             ratio1 = f"{row['ratio_vs_first_call']:.2f}" if "ratio_vs_first_call" in row else "-"
-            print(f"| {row['method']} | {_fmt_time(row.get('first_call_s'))} | {_fmt_time(row['second_call_s'])} | {_fmt_time(row.get('compile_s'))} | {ratio2} | {ratio1} | {row['residual_rms']:.1f} Pa |")
+            print(
+                f"| {row['method']} | {_fmt_time(row.get('first_call_s'))} | {_fmt_time(row['second_call_s'])} | {_fmt_time(row.get('compile_s'))} | {ratio2} "
+                f"| {ratio1} | {row['residual_rms']:.1f} Pa |"
+            )
 
 
 def main(argv=None):

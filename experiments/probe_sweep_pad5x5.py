@@ -40,8 +40,12 @@ import optimistix as optx  # noqa: E402
 
 from hydrotact._files import atomic_path, digest, write_text_atomic  # noqa: E402
 from hydrotact.contact import calc_contact_surface, compute_contact_surface, make_cylinder_probe, make_pose  # noqa: E402
-from hydrotact.sim import SimCapacity, calc_unit_response, make_sensor_model
-from hydrotact.sim import grown_sim_capacity  # noqa: E402
+from hydrotact.sim import (
+    SimCapacity,
+    calc_unit_response,
+    grown_sim_capacity,
+    make_sensor_model,
+)
 
 PITCH = 2.2e-3
 TOP = 4e-3

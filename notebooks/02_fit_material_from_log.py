@@ -148,7 +148,6 @@ true_gains = dict(zip(log.metadata["channels"], log.metadata["barometer"]["gains
 # We write such a file from the simulated log, exactly as a rig would.
 
 # %%
-from hydrotact.data import read_log
 
 STEP = 1.25e-6  # m per stage motor step
 user_csv = OUT / "rig_log.csv"

@@ -15,7 +15,7 @@ import pytest
 from hydrotact.contact import make_cylinder_probe, make_sphere_probe
 from hydrotact.data import make_material_document, material_prony
 from hydrotact.sensors import load_sensor
-from hydrotact.sim import BarometerSettings, calc_simulation, make_sensor_model, make_trajectory, read_trajectory, simulate, simulate_log
+from hydrotact.sim import BarometerSettings, calc_simulation, compute_unit_responses, make_sensor_model, make_trajectory, read_trajectory, simulate, simulate_log
 from hydrotact.visco import make_barometer_signal, make_prony
 
 DATA = Path(__file__).parent / "data"
@@ -52,10 +52,10 @@ SPHERE = make_sphere_probe(3e-3)
 
 
 @eqx.filter_jit
-def _objective(model, material, trajectory, signal):
+def _objective(model, material, trajectory, signal, capacity):
     """A scalar of the readings that every parameter reaches: a weighted sum over
     samples and channels, plus the vertical force (no noise key: deterministic)."""
-    samples = calc_simulation(model, material, SPHERE, trajectory, barometer=signal)
+    samples = calc_simulation(model, material, SPHERE, trajectory, capacity, barometer=signal)
     weights = jnp.linspace(0.5, 1.5, samples.readings.size).reshape(samples.readings.shape)
     return jnp.sum(weights * (samples.readings - signal.ambient)) + 1e3 * jnp.sum(samples.force_S[:, 2])
 
@@ -65,7 +65,12 @@ def arguments(pad_model):
     # no quantisation: its straight-through gradient is not the derivative of the
     # rounded reading, which central differences would see
     signal = eqx.tree_at(lambda s: s.lsb, _barometer(pad_model), jnp.asarray(0.0))
-    return (pad_model, _material(), _press(), signal)
+    trajectory = _press()
+    # buffers that hold every pose: a truncated buffer would make the readings jump
+    _, capacity = compute_unit_responses(pad_model, SPHERE, trajectory.X_SR)
+    samples = calc_simulation(pad_model, _material(), SPHERE, trajectory, capacity, barometer=signal)
+    assert not bool(np.any(np.asarray(samples.unit.overflow)))
+    return (pad_model, _material(), trajectory, signal, capacity)
 
 
 @pytest.fixture(scope="module")

@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 
 from hydrotact._errors import HydrotactError
-from hydrotact.contact import Capacity, HalfSpace, compute_contact_surface, make_cylinder_probe, make_pose, make_sphere_probe
-from hydrotact.visco import make_prony
+from hydrotact.contact import Capacity, HalfSpace, compute_contact_surface, make_cylinder_probe, make_sphere_probe
 from hydrotact.sim import (
     SimCapacity,
     calc_contact_angles,
@@ -18,6 +17,7 @@ from hydrotact.sim import (
     make_trajectory,
     simulate,
 )
+from hydrotact.visco import make_prony
 
 PAD_TOP = 4e-3
 SPHERE_CENTRE = np.array([0.0, 0.0, 5e-3])

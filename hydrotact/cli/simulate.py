@@ -53,7 +53,10 @@ def checkpoint_path(output) -> Path:
     return output.with_name(f".{output.name}.partial.npz")
 
 
-def run_simulate(sensor: str, probe_spec: str, trajectory_path, output, *, modulus=DEFAULT_MODULUS, material=None, barometer=False, seed=0, noise_rms=None, gain_spread=0.0, offset_spread=0.0, force_noise=0.0, field="laplace", num_rays=64, units="m", png=None, progress=True) -> dict:
+def run_simulate(
+    sensor: str, probe_spec: str, trajectory_path, output, *, modulus=DEFAULT_MODULUS, material=None, barometer=False, seed=0, noise_rms=None,
+    gain_spread=0.0, offset_spread=0.0, force_noise=0.0, field="laplace", num_rays=64, units="m", png=None, progress=True,
+) -> dict:
     """Simulate the sensor along the trajectory file and write the log (and plot).
 
     With `material` (a material.json), the material is viscoelastic; with `barometer`,

@@ -9,9 +9,8 @@ from .._defaults import DEFAULT_MODULUS
 from .._errors import HydrotactError
 from ..mesh import TetMesh
 from ._distance import calc_distance_field
-from ._solve import make_laplace_problem, solve_strain
 from ._kinds import StrainFieldKind
-
+from ._solve import make_laplace_problem, solve_strain
 
 
 def solve_field_report(

@@ -25,7 +25,7 @@ import numpy as np
 
 from .. import __version__
 from .._files import atomic_path, cache_dir, digest
-from ..contact import map_over_poses, make_pose
+from ..contact import make_pose, map_over_poses
 from ..contact._api import grown_contact_capacity
 from ..taxel import grown_capacity
 from ..visco import BarometerSignal, Prony
@@ -72,14 +72,14 @@ def compute_unit_responses(model: SensorModel, probe, X_SR, capacity: SimCapacit
         bar = tqdm(total=count, unit="sample", desc=f"simulating {model.name}", leave=False)
     for start in range(0, count, chunk):
         index = np.minimum(np.arange(start, start + chunk), count - 1)  # pad the last chunk
-        poses = jax.tree_util.tree_map(lambda a: a[index], X_SR)
+        poses = jax.tree_util.tree_map(lambda a, index=index: a[index], X_SR)
         while True:
             unit = _chunk_response(model, probe, poses, capacity)
             if not bool(np.any(np.asarray(unit.overflow))):
                 break
             capacity = grown_sim_capacity(capacity, unit)
         used = min(chunk, count - start)
-        pieces.append(jax.tree_util.tree_map(lambda a: np.asarray(a)[:used], unit))
+        pieces.append(jax.tree_util.tree_map(lambda a, used=used: np.asarray(a)[:used], unit))
         if bar is not None:
             bar.update(used)
     if bar is not None:

@@ -25,7 +25,6 @@ Conventions (frame S, the sensor base frame: PCB on z = 0, +z the pad normal):
 """
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 
 from .._math import safe_div, safe_norm

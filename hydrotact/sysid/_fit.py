@@ -16,7 +16,6 @@ import dataclasses
 import time
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
@@ -137,7 +136,7 @@ class FitResult:
 
     def offsets(self) -> list[dict]:
         """Per log: channel -> offset estimate (Pa)."""
-        result, first = [], 0
+        result = []
         for k, (info, log) in enumerate(zip(self.problem.infos, self.problem.logs)):
             entries = {}
             for c, channel in enumerate(info.channels):

@@ -48,7 +48,10 @@ def read_logs(paths, mapping=None, sensor=None, report_warning=None):
     return logs
 
 
-def fit_logs(paths, output, *, sensor=None, lumped=False, indentation="indentation", mapping=None, terms="auto", solver=None, tare=False, field=None, num_rays=None, progress=True, report_warning=None, plot=None) -> dict:
+def fit_logs(
+    paths, output, *, sensor=None, lumped=False, indentation="indentation", mapping=None, terms="auto", solver=None, tare=False,
+    field=None, num_rays=None, progress=True, report_warning=None, plot=None,
+) -> dict:
     """Fit the logs at `paths` and write material.json, report.json (and, with `plot`,
     the pictures) into `output`. With `tare`, each log is first tared on its no-load
     segments (found automatically; the baseline interpolated in time between them),

@@ -28,7 +28,6 @@ import dataclasses
 from pathlib import Path
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -154,7 +153,10 @@ def _channel_values(log) -> np.ndarray:
     return np.column_stack([np.asarray(log.columns[name], dtype=np.float64) for name in log.metadata["channels"]])
 
 
-def make_fit_problem(logs, *, mode: str = "full", indentation: str = "indentation", field: str | None = None, num_rays: int | None = None, use_forces: bool = True, unit_responses=None, sources=None, progress: bool = False) -> FitProblem:
+def make_fit_problem(
+    logs, *, mode: str = "full", indentation: str = "indentation", field: str | None = None, num_rays: int | None = None, use_forces: bool = True,
+    unit_responses=None, sources=None, progress: bool = False,
+) -> FitProblem:
     """Build a FitProblem from BarometerLogs (host).
 
     **Arguments:**
@@ -245,5 +247,10 @@ def make_fit_problem(logs, *, mode: str = "full", indentation: str = "indentatio
                 num_channels=num_channels,
             )
         )
-        infos.append(LogInfo(source=source, channels=channels, excluded=excluded, force_columns=force_columns, sensor=log.metadata.get("sensor"), pressure=log.metadata.get("pressure", "absolute"), sha256=_file_digest(source), noise=tuple(float(v) for v in noise)))
+        infos.append(
+            LogInfo(
+                source=source, channels=channels, excluded=excluded, force_columns=force_columns, sensor=log.metadata.get("sensor"),
+                pressure=log.metadata.get("pressure", "absolute"), sha256=_file_digest(source), noise=tuple(float(v) for v in noise),
+            )
+        )
     return FitProblem(logs=tuple(prepared), mode=mode, gain_names=tuple(gain_names), infos=tuple(infos))

@@ -91,7 +91,8 @@ def fit_relaxation_curve(times, modulus, num_terms="auto", solver: Solver | None
     x = np.asarray(x)
     std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
     count = int(num_terms)
-    terms = sorted(((Estimate(np.exp(x[1 + k]), np.exp(x[1 + k]) * std[1 + k]), Estimate(np.exp(x[1 + count + k]), np.exp(x[1 + count + k]) * std[1 + count + k])) for k in range(count)), key=lambda pair: pair[1].value)
+    pairs = ((Estimate(np.exp(x[1 + k]), np.exp(x[1 + k]) * std[1 + k]), Estimate(np.exp(x[1 + count + k]), np.exp(x[1 + count + k]) * std[1 + count + k])) for k in range(count))
+    terms = sorted(pairs, key=lambda pair: pair[1].value)
     fitted = np.asarray(Prony(jnp.exp(x[0]), jnp.exp(x[1 : 1 + count]), jnp.exp(x[1 + count :])).calc_relaxation_modulus(times))
     return RelaxationFit(
         long_term_modulus=Estimate(float(np.exp(x[0])), float(np.exp(x[0]) * std[0])),
