@@ -22,11 +22,13 @@ $(VENV)/.installed-test: pyproject.toml | $(BIN)/python
 demo: $(VENV)/.installed
 	$(BIN)/hydrotact demo --output out
 
-# Each test file runs in a fresh process: over one long session XLA's CPU compiler
-# crashed (SIGSEGV while compiling, after ~200 tests of JAX, VTK rendering and Drake in
-# one process; the same test passes alone). pytest exits 5 when it collected no tests:
+# Lint first (ruff, configured in pyproject.toml); a lint error fails the run before any
+# test. Then each test file runs in a fresh process: over one long session XLA's CPU
+# compiler crashed (SIGSEGV while compiling, after ~200 tests of JAX, VTK rendering and
+# Drake in one process; the same test passes alone). pytest exits 5 when it collected no tests:
 # that is a failure here, like any non-zero status, and any failing file fails the run.
 test: $(VENV)/.installed-test
+	$(BIN)/ruff check .
 	@status=0; for file in tests/test_*.py; do \
 	    echo "== $$file"; $(BIN)/python -m pytest $$file || status=1; \
 	done; \

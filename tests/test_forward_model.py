@@ -106,6 +106,15 @@ def test_gradient_matches_central_differences(arguments, gradient, name, select,
     np.testing.assert_allclose(analytic, numeric, rtol=1e-5, err_msg=name)
 
 
+def test_disk_taxel_moved_along_its_axis_reads_the_same(arguments, gradient):
+    """A disk field's rays run along the axis: sliding the taxel along it changes no
+    hit, so the reading's derivative is exactly 0, both ways."""
+    select = lambda a: a[0].layout.positions_S
+    assert float(select(gradient)[12, 2]) == 0.0
+    lower, upper = (eqx.tree_at(select, arguments, select(arguments).at[12, 2].add(delta)) for delta in (-1e-5, 1e-5))
+    assert float(_objective(*lower)) == pytest.approx(float(_objective(*upper)), rel=1e-12)
+
+
 def test_jit_vmap_over_trajectories_and_no_recompile(pad_model):
     probe = make_cylinder_probe(2e-3)
     material = _material()

@@ -14,17 +14,17 @@ sampling (jitter, gaps, a rate other than the declared one) is a :class:`LogWarn
 with the figures.
 """
 
-import functools
 import json
 import warnings
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from .._errors import HydrotactError
 from .._files import atomic_path
-from .._schemas import load_schema, parse_json, read_json, validate
+from .._schemas import parse_json, read_json, validate
+from ._mapping import ColumnMapping, apply_mapping, load_mapping
+from ._table import BarometerLog, known_columns, sensor_spec
 
 METADATA_KEY = b"hydrotact"
 SUFFIXES = (".parquet", ".csv")
@@ -40,64 +40,6 @@ PRESSURE_LIMIT_PA = 1e7
 class LogWarning(UserWarning):
     """A log that reads but may mislead a fit: uneven sampling, gaps, a rate other
     than the declared one. The message gives the figures."""
-
-
-def known_columns() -> dict:
-    """The optional columns a log may carry: name -> {unit, description, ...}."""
-    return load_schema("barometer_log")["$defs"]["columns"]["default"]
-
-
-@dataclass(frozen=True)
-class BarometerLog:
-    """A log in memory: `metadata` (the schema's document) and `columns` (name ->
-    1-D NumPy array, all of one length), SI units. `source_columns` says, for a log
-    read through a column mapping, which column of the user's file each log column
-    came from (messages name that column too)."""
-
-    metadata: dict
-    columns: dict
-    source_columns: dict = field(default_factory=dict, compare=False)
-
-    @property
-    def times(self) -> np.ndarray:
-        return self.columns["time"]
-
-    @property
-    def channels(self) -> np.ndarray:
-        """(num_samples, num_channels) barometer columns in channel order."""
-        return np.column_stack([self.columns[name] for name in self.metadata["channels"]])
-
-    @property
-    def num_samples(self) -> int:
-        return len(self.columns["time"])
-
-    def describe_column(self, name: str) -> str:
-        """`'b00'`, or `'b00' (file column 'Sensor_0')` for a mapped log."""
-        origin = self.source_columns.get(name)
-        return f"{name!r}" if origin is None or origin == name else f"{name!r} (file column {origin!r})"
-
-
-@functools.cache
-def _cached_spec(sensor: str, modified: float | None):
-    from ..sensors import load_sensor
-
-    return load_sensor(sensor)
-
-
-def sensor_spec(sensor: str, source: str | None = None):
-    """The sensor spec a log's `sensor` names (a built-in name or an existing sensor
-    JSON file), or None when it names neither (a log may come from elsewhere)."""
-    from ..sensors import BUILTIN_SENSORS
-
-    if sensor in BUILTIN_SENSORS:
-        return _cached_spec(sensor, None)
-    path = Path(sensor)
-    if not path.is_file():
-        return None
-    try:
-        return _cached_spec(str(path), path.stat().st_mtime)
-    except HydrotactError as error:
-        raise HydrotactError(f"{source}: sensor: {error}") from None
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -353,7 +295,6 @@ def read_log(path, mapping=None, *, sensor: str | None = None) -> BarometerLog:
 
     **Returns:** the :class:`BarometerLog`, SI units.
     """
-    from ._mapping import ColumnMapping, apply_mapping, load_mapping
 
     path = Path(path)
     source = str(path)

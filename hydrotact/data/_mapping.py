@@ -15,6 +15,7 @@ import numpy as np
 
 from .._errors import HydrotactError
 from .._schemas import format_path, read_json, validate
+from ._table import BarometerLog, known_columns, sensor_spec
 
 # Units a column may be declared in, per quantity kind: name -> factor to SI.
 UNITS = {
@@ -51,7 +52,6 @@ def unit_kind(unit: str) -> str | None:
 
 
 def _known_columns() -> dict:
-    from ._log import known_columns
 
     return known_columns()
 
@@ -172,7 +172,6 @@ def apply_mapping(table_columns: dict, mapping, source: str, *, sensor: str | No
 
     **Returns:** a :class:`BarometerLog` (not yet checked: :func:`check_log` does that).
     """
-    from ._log import BarometerLog, sensor_spec
 
     if not isinstance(mapping, ColumnMapping):
         mapping = check_mapping(mapping)
