@@ -18,13 +18,14 @@ import numpy as np
 
 from .._errors import HydrotactError
 from .._schemas import format_path, parse_json, read_json, validate
+from .._units import LENGTH_UNITS
 from ..mesh import SEED_SENSORS, SURFACE_SUFFIXES, TetMesh, load_surface, make_seed_mesh, seed_surface
-from ..mesh._surface import UNIT_SCALES
 from ._builtins import BUILTIN_SENSORS
 from ._inside import find_points_outside_surface, find_points_outside_tets
 
 _DATA = files("hydrotact.sensors") / "data"
-LENGTH_SCALES = {name: UNIT_SCALES[name] for name in ("m", "mm", "um")}
+# The length units a sensor file may use (its schema lists the same ones).
+LENGTH_SCALES = {name: LENGTH_UNITS[name] for name in ("m", "mm", "um")}
 ANGLE_SCALES = {"rad": 1.0, "deg": math.pi / 180.0}
 # A port on the elastomer's boundary counts as inside: the surface check allows this
 # fraction of the bounding-box diagonal (round-off), the tet-mesh check fTetWild's
@@ -143,7 +144,7 @@ class SensorSpec:
         else:
             from .._jobs import load_tet_mesh  # the command line's surface -> mesh path
 
-            scale = UNIT_SCALES[geometry.surface_units]
+            scale = LENGTH_UNITS[geometry.surface_units]
             mesh = load_tet_mesh(
                 geometry.path,
                 edge_length=geometry.edge_length,
