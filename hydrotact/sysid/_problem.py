@@ -146,9 +146,8 @@ def store_unit_responses(spec, probe_spec: str, field: str, num_rays: int, pose_
 def _unique_pose_responses(log, source: str, field: str, num_rays: int, progress: bool):
     """Unit responses of the log's taxels and contact force at its probe poses: each
     distinct pose is simulated once (holds repeat poses), results cached on disk."""
-    from .._contact_job import parse_probe
     from .._files import atomic_path
-    from ..contact import make_pose
+    from ..contact import make_pose, parse_probe
     from ..sensors import load_sensor
     from ..sim import compute_unit_responses, make_sensor_model
 

@@ -10,8 +10,8 @@ from ._patterns import (
 )
 from ._raycast import calc_surface_triangles as calc_surface_triangles, intersect_ray_triangle as intersect_ray_triangle
 from ._sample import (
+    TaxelCapacity as TaxelCapacity,
     TaxelReadings as TaxelReadings,
     calc_taxel_pressures as calc_taxel_pressures,
-    grown_capacity as grown_capacity,
     sample_taxels as sample_taxels,
 )
