@@ -76,7 +76,7 @@ def _reference_force(model, probe, capacity, modulus, depth, xy):
     X_SR = make_pose(jnp.concatenate([xy, jnp.reshape(TOP - depth, (1,))]))
     surface = calc_contact_surface(model.field, probe, X_SR, capacity.contact, model.clusters)
     force, _ = surface.calc_wrench()
-    return -modulus * force[2], surface.overflow
+    return -modulus * force[2], surface.did_overflow
 
 
 @eqx.filter_jit
