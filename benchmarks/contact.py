@@ -84,7 +84,7 @@ def _ours_seconds_per_batch(field, other, translations, capacity, chunk, repeats
     def wrench(translation):
         surface = calc_contact_surface(field, other, make_pose(translation), capacity, clusters)
         force, torque = surface.calc_wrench()
-        return force, torque, surface.total_area, surface.overflow
+        return force, torque, surface.total_area, surface.did_overflow
 
     seconds, result = time_over_poses(wrench, translations, chunk, repeats)
     assert not bool(np.any(result[3])), "capacity too small for the benchmark poses"

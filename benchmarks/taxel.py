@@ -71,21 +71,21 @@ def main():
         sample = jax.vmap(make_pose)(jnp.asarray(_poses(sensor, 64)))
         surfaces, contact_capacity = compute_contact_surface(model.field, probe, sample, clusters=model.clusters)
         _, taxel_pairs = sample_taxels(model.layout, surfaces, rays)
-        capacity = SimCapacity(contact=contact_capacity, taxel_pairs=taxel_pairs)
+        capacity = SimCapacity.of(contact_capacity, taxel_pairs)
 
         def culled(translation, model=model, probe=probe, capacity=capacity, rays=rays):
             surface = calc_contact_surface(model.field, probe, make_pose(translation), capacity.contact, model.clusters)
-            readings = calc_taxel_pressures(model.layout, surface, rays, capacity.taxel_pairs)
-            return readings.pressures, surface.calc_force(), surface.overflow | readings.overflow
+            readings = calc_taxel_pressures(model.layout, surface, rays, capacity.taxel)
+            return readings.pressures, surface.calc_force(), surface.did_overflow | readings.did_overflow
 
         def brute(translation, model=model, probe=probe, capacity=capacity, rays=rays):
             surface = calc_contact_surface(model.field, probe, make_pose(translation), capacity.contact, model.clusters)
             readings = calc_taxel_pressures(model.layout, surface, rays, brute_force=True)
-            return readings.pressures, surface.calc_force(), surface.overflow
+            return readings.pressures, surface.calc_force(), surface.did_overflow
 
         def contact_only(translation, model=model, probe=probe, capacity=capacity):
             surface = calc_contact_surface(model.field, probe, make_pose(translation), capacity.contact, model.clusters)
-            return surface.calc_wrench(), surface.overflow
+            return surface.calc_wrench(), surface.did_overflow
 
         brute_translations = jnp.asarray(_poses(sensor, args.brute_frames))
         brute_rate, brute_result = _frames_per_second(brute, brute_translations, 1)

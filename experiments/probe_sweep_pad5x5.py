@@ -40,12 +40,8 @@ import optimistix as optx  # noqa: E402
 
 from hydrotact._files import atomic_path, digest, write_text_atomic  # noqa: E402
 from hydrotact.contact import calc_contact_surface, compute_contact_surface, make_cylinder_probe, make_pose  # noqa: E402
-from hydrotact.sim import (
-    SimCapacity,
-    calc_unit_response,
-    grown_sim_capacity,
-    make_sensor_model,
-)
+from hydrotact.sim import SimCapacity, calc_unit_response, make_sensor_model  # noqa: E402
+from hydrotact.taxel import TaxelCapacity  # noqa: E402
 
 PITCH = 2.2e-3
 TOP = 4e-3
@@ -80,7 +76,7 @@ def _reference_force(model, probe, capacity, modulus, depth, xy):
     X_SR = make_pose(jnp.concatenate([xy, jnp.reshape(TOP - depth, (1,))]))
     surface = calc_contact_surface(model.field, probe, X_SR, capacity.contact, model.clusters)
     force, _ = surface.calc_wrench()
-    return -modulus * force[2], surface.overflow
+    return -modulus * force[2], surface.did_overflow
 
 
 @eqx.filter_jit
@@ -135,9 +131,11 @@ def run_sweep(name, model, probe, capacity, modulus, step, smoke, chunk, partial
             while True:  # grow the buffers if the contact at the solved depths needs it
                 depth, force, overflow, converged = solve_depths(model, probe, capacity, jnp.asarray(modulus), xy, jnp.asarray(0.45e-3))
                 unit = _responses(model, probe, xy, depth, capacity)
-                if not bool(jnp.any(overflow | unit.overflow)):
+                if not bool(jnp.any(overflow | unit.did_overflow)):
                     break
-                capacity = grown_sim_capacity(capacity, unit)
+                # the one growth rule: to what the overflowing responses needed (every
+                # buffer doubled when only the depth search overflowed)
+                capacity = capacity.grown_to(np.asarray(unit.needed)[np.asarray(unit.did_overflow)])
             used = min(chunk, len(s) - start)
             piece = {
                 "depth": np.asarray(depth)[:used],
@@ -239,7 +237,7 @@ def main(argv=None):
     # Buffers that hold the deepest contact of the sweeps (found once, then fixed).
     probes = jax.vmap(make_pose)(jnp.array([[x, y, TOP - 0.9e-3] for x in (-4.4e-3, 0.0, 1.1e-3) for y in (-4.4e-3, 0.0, 0.55e-3)]))
     _, contact_capacity = compute_contact_surface(model.field, probe, probes, clusters=model.clusters)
-    capacity = SimCapacity(contact=contact_capacity, taxel_pairs=1 << 13)
+    capacity = SimCapacity.of(contact_capacity, TaxelCapacity(1 << 13))
     args.output.mkdir(parents=True, exist_ok=True)
     results = {}
     for name in SWEEPS:

@@ -1,5 +1,9 @@
-"""Contact surfaces: closed forms, broad phase vs brute force, gradients, edge cases."""
+"""Contact surfaces: closed forms, broad phase vs brute force, gradients, edge cases,
+and the probes' spec strings."""
 
+import re
+
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -7,6 +11,7 @@ import pytest
 
 from hydrotact import HydrotactError
 from hydrotact.contact import (
+    AbstractProbe,
     Capacity,
     HalfSpace,
     calc_contact_surface,
@@ -20,6 +25,8 @@ from hydrotact.contact import (
     make_pose,
     make_sphere_probe,
     make_tet_clusters,
+    parse_length,
+    parse_probe,
 )
 from hydrotact.field import calc_distance_field, make_laplace_problem, make_pressure_field, solve_strain
 from hydrotact.mesh import FREE, make_ball, make_box, make_seed_mesh
@@ -96,7 +103,7 @@ def _surface_key(surface):
 def _assert_same_surface(culled, brute):
     """The same polygons (same tet and triangle pairs) with the same values; XLA may
     fuse the two programs differently, so values agree to round-off."""
-    assert not bool(culled.overflow)
+    assert not bool(culled.did_overflow)
     tets, others, areas, integrals = _surface_key(culled)
     ref_tets, ref_others, ref_areas, ref_integrals = _surface_key(brute)
     np.testing.assert_array_equal(tets, ref_tets)
@@ -137,28 +144,28 @@ def test_overflow_is_detected_and_retried():
     # Each soft-rigid buffer reports its own overflow: the candidate pairs (boxes
     # overlap), then, once those fit, the polygons (the pairs the plane tests keep).
     small = calc_soft_rigid_surface(field, probe, X, Capacity(64, 64, 128, 128))
-    assert bool(small.overflow) and int(small.needed[2]) > 128
+    assert bool(small.did_overflow) and int(small.needed[2]) > 128
     small = calc_soft_rigid_surface(field, probe, X, Capacity(64, 64, 8192, 128))
-    assert bool(small.overflow) and int(small.needed[3]) > 128 and int(small.needed[2]) <= 8192
+    assert bool(small.did_overflow) and int(small.needed[3]) > 128 and int(small.needed[2]) <= 8192
     surface, capacity = compute_contact_surface(field, probe, X, Capacity(64, 64, 128, 128))
-    assert not bool(surface.overflow) and capacity.pairs > 128 and capacity.polygons > 128
+    assert not bool(surface.did_overflow) and capacity.pairs > 128 and capacity.polygons > 128
     # The half-space's two buffers (tets by cluster, then polygons) grow as well.
     X_half = make_pose([0.0, 0.0, 3.5e-3])
     small = calc_half_space_surface(field, X_half, Capacity(64, 0, 0, 64), clusters=make_tet_clusters(field.vertices, field.tets))
-    assert bool(small.overflow) and int(small.needed[0]) > 64
+    assert bool(small.did_overflow) and int(small.needed[0]) > 64
     half_space, half_capacity = compute_contact_surface(field, HalfSpace(), X_half, Capacity(64, 0, 0, 64))
-    assert not bool(half_space.overflow) and half_capacity.tets > 64 and half_capacity.polygons > 64
+    assert not bool(half_space.did_overflow) and half_capacity.tets > 64 and half_capacity.polygons > 64
     assert int(half_space.num_polygons) == int(calc_half_space_surface(field, X_half, brute_force=True).num_polygons)
     reference, _ = compute_contact_surface(field, probe, X)
     np.testing.assert_allclose(np.asarray(surface.calc_force()), np.asarray(reference.calc_force()), rtol=1e-12, atol=1e-15)
 
 
 def test_overflow_beyond_the_limit_is_a_clear_error(monkeypatch):
-    from hydrotact.contact import _api
+    from hydrotact import _buffers
 
-    monkeypatch.setattr(_api, "MAX_PAIRS", 64)
+    monkeypatch.setattr(_buffers, "MAX_BUFFER", 64)
     field = make_pressure_field(mesh := make_seed_mesh("pad5x5"), calc_distance_field(mesh), E)
-    with pytest.raises(HydrotactError, match="needs more than 64 candidate pairs"):
+    with pytest.raises(HydrotactError, match="the contact needs more than 64 entries in its \\w+ buffer .*overlap too deeply"):
         compute_contact_surface(field, make_cylinder_probe(2e-3), make_pose([0.0, 0.0, 3.5e-3]), Capacity(16, 16, 32))
 
 
@@ -224,7 +231,7 @@ def test_gradients_wrt_pose_modulus_and_field_soft_rigid(rng):
     t0 = jnp.array([0.31e-3, -0.17e-3, 4e-3 - 0.6e-3])
     w0 = jnp.array([0.2, -0.1, 0.3])
     args = (t0, w0, jnp.asarray(E), jnp.asarray(strain))
-    assert not bool(calc_soft_rigid_surface(make_pressure_field(mesh, strain, E), probe, make_pose(t0, w0), capacity).overflow)
+    assert not bool(calc_soft_rigid_surface(make_pressure_field(mesh, strain, E), probe, make_pose(t0, w0), capacity).did_overflow)
     _check_jacobians(summary, args, steps=(1e-8, 1e-5, 1.0, 1e-5), rng=rng, skin=mesh.vertices_tagged(FREE))
 
 
@@ -248,7 +255,7 @@ def test_gradients_half_space_and_soft_soft(rng):
         return jnp.concatenate([force, 1e3 * torque, jnp.array([surface.total_area * 1e6])])
 
     t0, w0 = jnp.array([0.7e-3, 0.3e-3, 9.1e-3]), jnp.array([0.2, -0.1, 0.05])
-    assert not bool(calc_soft_soft_surface(field, field, make_pose(t0, w0), capacity).overflow)
+    assert not bool(calc_soft_soft_surface(field, field, make_pose(t0, w0), capacity).did_overflow)
     _check_jacobians(soft_soft, (t0, w0, jnp.asarray(E), strain), (1e-8, 1e-5, 1.0, 1e-5), rng, mesh.vertices_tagged(FREE))
 
 
@@ -310,3 +317,64 @@ def test_calc_contact_surface_dispatch_and_bad_other():
     mesh, field = _ball_field(5e-3, 2)
     with pytest.raises(HydrotactError, match="cannot compute contact with a str"):
         calc_contact_surface(field, "plane", make_pose())
+
+
+# --- probes --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "probe",
+    [
+        HalfSpace(),
+        make_cylinder_probe(2e-3),
+        make_cylinder_probe(2e-3, length=3e-3, num_sides=12),
+        make_cylinder_probe(0.0017),
+        make_sphere_probe(3e-3),
+        make_sphere_probe(2.5e-6, subdivisions=1),
+        make_box_probe((4e-3, 4e-3, 2e-3)),
+    ],
+    ids=lambda probe: probe.spec,
+)
+def test_probe_spec_round_trips(probe):
+    assert isinstance(probe, AbstractProbe) and probe.spec
+    again = parse_probe(probe.spec)
+    assert type(again) is type(probe) and again.spec == probe.spec
+    assert eqx.tree_equal(again, probe)
+
+
+def test_probe_specs_read_lengths_in_any_unit():
+    assert make_cylinder_probe(2e-3).spec == "cylinder:d=2mm"
+    assert HalfSpace().spec == "plane"
+    for spec in ("cylinder:d=2mm", "cylinder:d=2000um", "cylinder:d=0.002", "cylinder:d=0.2cm", "cylinder:d=2e-3m"):
+        assert eqx.tree_equal(parse_probe(spec), make_cylinder_probe(2e-3)), spec
+    assert eqx.tree_equal(parse_probe("cylinder:d=2mm,length=10mm"), make_cylinder_probe(2e-3, 10e-3))
+    assert eqx.tree_equal(parse_probe("sphere:r=3mm"), make_sphere_probe(3e-3))
+    assert parse_length("2mm", "x") == 2e-3 and parse_length(" 0.5 um", "x") == 0.5e-6 and parse_length("3e-3", "x") == 3e-3
+
+
+@pytest.mark.parametrize(
+    ("spec", "message"),
+    [
+        ("cone:h=1", "--probe: unknown probe 'cone:h=1'"),
+        ("cylinder:r=2mm", "--probe: unknown probe 'cylinder:r=2mm'"),
+        ("sphere:r=3mm,d=1mm", "--probe: unknown probe 'sphere:r=3mm,d=1mm'"),
+        ("plane:d=1mm", "--probe: unknown probe 'plane:d=1mm'"),
+        ("box:x=1mm,y=1mm", "--probe: unknown probe 'box:x=1mm,y=1mm'"),
+        ("cylinder:d=2 furlongs", "--probe d: cannot read '2 furlongs' as a length"),
+        ("cylinder:d=2mm,sides=many", "--probe sides: cannot read 'many' as a whole number"),
+    ],
+)
+def test_bad_probe_specs_are_clear_errors(spec, message):
+    with pytest.raises(HydrotactError, match=re.escape(message)):
+        parse_probe(spec)
+
+
+def test_contact_query_delegates_to_the_probe():
+    mesh, field = _ball_field(5e-3, 2)
+    X = make_pose([0.0, 0.0, 4.5e-3])
+    probe = make_sphere_probe(3e-3)
+    by_query = calc_contact_surface(field, probe, X, Capacity(512, 512, 8192, 2048))
+    by_probe = probe.calc_contact_surface(field, X, Capacity(512, 512, 8192, 2048))
+    assert eqx.tree_equal(by_query, by_probe) and int(by_query.num_polygons) > 0
+    half = calc_contact_surface(field, HalfSpace(), X)
+    assert eqx.tree_equal(half, calc_half_space_surface(field, X))

@@ -69,7 +69,7 @@ def arguments(pad_model):
     # buffers that hold every pose: a truncated buffer would make the readings jump
     _, capacity = compute_unit_responses(pad_model, SPHERE, trajectory.X_SR)
     samples = calc_simulation(pad_model, _material(), SPHERE, trajectory, capacity, barometer=signal)
-    assert not bool(np.any(np.asarray(samples.unit.overflow)))
+    assert not bool(np.any(np.asarray(samples.unit.did_overflow)))
     return (pad_model, _material(), trajectory, signal, capacity)
 
 
@@ -131,7 +131,7 @@ def test_jit_vmap_over_trajectories_and_no_recompile(pad_model):
 
     one = run(first, jax.random.PRNGKey(0))
     two = run(second, jax.random.PRNGKey(1))  # same shapes: no second trace
-    assert not bool(np.any(np.asarray(one.unit.overflow) | np.asarray(two.unit.overflow)))
+    assert not bool(np.any(np.asarray(one.unit.did_overflow) | np.asarray(two.unit.did_overflow)))
     both = jax.tree_util.tree_map(lambda a, b: jnp.stack([a, b]), first, second)
     keys = jnp.stack([jax.random.PRNGKey(0), jax.random.PRNGKey(1)])
     batched = eqx.filter_jit(eqx.filter_vmap(lambda t, k: calc_simulation(pad_model, material, probe, t, capacity, barometer=signal, key=k)))(both, keys)

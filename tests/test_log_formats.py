@@ -297,12 +297,14 @@ BAD_CSV = [
     ("no-sensor", None, {"sensor": None}, {}, ["rig.csv", "which sensor", "--sensor"]),
     ("csv-without-metadata", None, None, {}, ["rig.csv", "no metadata document rig.json", "--mapping"]),
     ("absolute-not-positive", USER_CSV.replace("101380.0,", "-3.0,"), {}, {}, ["rig.csv", "column 'Sensor_0'", "row 4", "absolute pressure -3 Pa is not positive"]),
-    ("pressure-in-wrong-unit", None, {"channels": [{"column": f"Sensor_{k}", "unit": "bar"} for k in range(4)]}, {}, ["rig.csv", "column 'Sensor_0'", "row 1", "1.01325e+10 Pa is beyond the 1e+07 Pa"]),
+    ("pressure-in-wrong-unit", None, {"channels": [{"column": f"Sensor_{k}", "unit": "bar"} for k in range(4)]}, {}, ["rig.csv",
+        "column 'Sensor_0'", "row 1", "1.01325e+10 Pa is beyond the 1e+07 Pa"]),
     ("text-cell", USER_CSV.replace("101400.0", "high"), {}, {}, ["rig.csv", "column 'Sensor_0'", "row 3", "'high' is not a number"]),
     ("ragged-row", USER_CSV.replace("32,4.5,0.04", "32,4.5"), {}, {}, ["rig.csv", "line 6", "6 fields, expected 7"]),
     ("empty-file", "", {}, {}, ["rig.csv", "not a readable CSV file"]),
     ("duplicate-header", USER_CSV.replace("x,z", "x,x"), {}, {}, ["rig.csv", "column 'x' appears twice"]),
-    ("non-numeric-mapped", USER_CSV, {"columns": {"contact": {"column": "x", "unit": "1"}}, "channels": [{"column": "Sensor_0", "unit": "Pa"}]}, {"sensor": "pad5x5"}, ["rig.csv", "1 channel columns", "25 taxels"]),
+    ("non-numeric-mapped", USER_CSV, {"columns": {"contact": {"column": "x", "unit": "1"}}, "channels": [{"column": "Sensor_0",
+        "unit": "Pa"}]}, {"sensor": "pad5x5"}, ["rig.csv", "1 channel columns", "25 taxels"]),
 ]
 
 
@@ -548,7 +550,8 @@ def _material(**changes):
         stds={"long_term_modulus": 5e3, "moduli": [1e3, 2e3], "taus": [0.01, 0.3]},
         covariance=np.diag([1e-4, 2e-4, 3e-4, 4e-4, 5e-4]),
         channels=[{"name": "b00", "gain": (1.0, 0.01), "offset_Pa": {"value": -2.0, "std": 1.0}}],
-        provenance={"created": "2026-11-23T00:00:00Z", "method": "fit", "mode": "lumped", "solver": "lm", "sensor": "pad5x5", "logs": [{"path": "a.csv", "sha256": "ab" * 32}], "num_samples": 1000, "cost": 1.5, "criterion": {"name": "bic", "value": -12.0}},
+        provenance={"created": "2026-11-23T00:00:00Z", "method": "fit", "mode": "lumped", "solver": "lm", "sensor": "pad5x5",
+            "logs": [{"path": "a.csv", "sha256": "ab" * 32}], "num_samples": 1000, "cost": 1.5, "criterion": {"name": "bic", "value": -12.0}},
         name="ecoflex",
         description="test",
     )

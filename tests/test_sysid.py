@@ -20,6 +20,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 import pytest
+from sysid_synthetic import FullLogMaker, make_lumped_log
 
 from hydrotact import HydrotactError
 from hydrotact.data import BarometerLog, read_material
@@ -38,7 +39,6 @@ from hydrotact.sysid import (
     solver_name,
 )
 from hydrotact.visco import make_prony
-from sysid_synthetic import FullLogMaker, make_lumped_log
 
 # E∞ and three well-separated terms (0.3, 3, 30 s).
 TRUTH_3 = dict(long_term_modulus=6e5, moduli=[2.5e5, 1.5e5, 1.0e5], taus=[0.3, 3.0, 30.0])

@@ -3,6 +3,7 @@
 import argparse
 
 from .._defaults import DEFAULT_MODULUS
+from .._units import LENGTH_UNITS
 
 MODULUS_HELP = f"hydroelastic modulus in Pa (default {DEFAULT_MODULUS:.0e})".replace("e+0", "e")
 """Help of every --modulus flag (its default is hydrotact.field.DEFAULT_MODULUS)."""
@@ -20,6 +21,6 @@ def add_source_arguments(parser: argparse.ArgumentParser, what: str) -> None:
     """The sensor-or-file argument and its meshing flags (mesh, field)."""
     parser.add_argument("source", metavar=what, help="a built-in sensor (pad5x5, sphere8, ellipsoid8) or a file")
     parser.add_argument("--edge-length", type=number, metavar="L", help="target tet edge length in metres (sensors, surfaces)")
-    parser.add_argument("--units", default="m", choices=["m", "mm", "cm", "um"], help="length unit of a surface file (default m)")
+    parser.add_argument("--units", default="m", choices=list(LENGTH_UNITS), help="length unit of a surface file (default m)")
     parser.add_argument("--core-plane", type=number, metavar="Z", help="the core (bonded) faces lie on the plane z = Z, in --units (default: the lowest z)")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")

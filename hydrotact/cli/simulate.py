@@ -12,6 +12,7 @@ import numpy as np
 
 from .._defaults import DEFAULT_MODULUS
 from .._errors import HydrotactError
+from .._units import LENGTH_UNITS
 from ._arguments import MODULUS_HELP, number
 from ._output import print_report
 
@@ -21,7 +22,7 @@ def add_parser(subparsers):
     parser.add_argument("--sensor", required=True, metavar="S", help="a built-in sensor (pad5x5, sphere8, ellipsoid8) or a sensor JSON file")
     parser.add_argument("--probe", required=True, metavar="SPEC", help="cylinder:d=2mm[,length=10mm], sphere:r=3mm or plane")
     parser.add_argument("--trajectory", required=True, type=Path, metavar="TRAJ.csv", help="CSV with columns time (s), x, y, z (probe tip, --units) and optionally rx, ry, rz (rad)")
-    parser.add_argument("--units", default="m", choices=["m", "mm", "cm", "um"], help="length unit of the trajectory's x, y, z (default m)")
+    parser.add_argument("--units", default="m", choices=list(LENGTH_UNITS), help="length unit of the trajectory's x, y, z (default m)")
     parser.add_argument("--modulus", type=number, default=DEFAULT_MODULUS, metavar="E", help=MODULUS_HELP)
     parser.add_argument("--material", type=Path, metavar="MATERIAL.json", help="a viscoelastic material (Prony series; e.g. from hydrotact fit); overrides --modulus")
     parser.add_argument("--barometer", action="store_true", help="write absolute barometer readings (the sensor's part: ambient, LSB, noise, rate) instead of elastomer pressures")
@@ -75,7 +76,8 @@ def run_simulate(
     if barometer:
         settings = BarometerSettings(seed=seed, noise_rms=noise_rms, gain_spread=gain_spread, offset_spread=offset_spread, force_noise=force_noise)
     else:
-        given = [flag for flag, value in (("--noise", noise_rms), ("--gain-spread", gain_spread or None), ("--offset-spread", offset_spread or None), ("--force-noise", force_noise or None)) if value is not None]
+        given = [flag for flag, value in (("--noise", noise_rms), ("--gain-spread", gain_spread or None), ("--offset-spread",
+            offset_spread or None), ("--force-noise", force_noise or None)) if value is not None]
         if given:
             raise HydrotactError(f"{given[0]}: applies to barometer readings; add --barometer")
     if material is not None:

@@ -1,22 +1,26 @@
 """Broad phase: which tets and triangles can touch, in fixed-capacity lists.
 
 Candidates are found in stages, each a test compacted into a fixed-capacity list by
-:func:`select` (a prefix sum and one scatter): first the tets (through their
+:func:`hydrotact._buffers.compact_indices`: first the tets (through their
 clusters) and the rigid triangles, or the other body's tets, that overlap the
 intersection of the two bodies' bounding boxes, then the pairs among those (the
 kernels add their own finer tests). Each list reports how many entries it needed,
 so overflow is detected, never silently truncated.
 """
 
+from typing import ClassVar
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._buffers import AbstractCapacity, compact_indices
 from .._types import Array, Int
 
 
-class Capacity(eqx.Module):
-    """Buffer sizes for the contact broad phase (static: changing one recompiles).
+class Capacity(AbstractCapacity):
+    """Buffer sizes for the contact broad phase (static: changing one recompiles), in
+    the order of :attr:`ContactSurface.needed`.
 
     - `tets`: soft tets near the other body (in whole clusters when clustered).
     - `others`: rigid triangles (or the other soft body's tets) near the soft body.
@@ -26,31 +30,17 @@ class Capacity(eqx.Module):
     - `polygons`: the contact polygons, the size of the returned surface: the
       candidate pairs that survive the separating-plane tests (soft-rigid), the cut
       tets (half-space), the overlapping tet pairs (soft-soft).
+
+    Grown by the one rule of :meth:`AbstractCapacity.grown_to`.
     """
+
+    purpose: ClassVar[str] = "the contact"
+    advice: ClassVar[str] = "the bodies overlap too deeply"
 
     tets: int = eqx.field(static=True, default=256)
     others: int = eqx.field(static=True, default=256)
     pairs: int = eqx.field(static=True, default=4096)
     polygons: int = eqx.field(static=True, default=1024)
-
-    def grown_to(self, needed) -> "Capacity":
-        """The smallest capacity at least this one and `needed` (tets, others, pairs,
-        polygons), each buffer rounded up to 8 to 15 times a power of two (at most
-        12.5 % more than needed, and few distinct sizes to compile)."""
-
-        def fit(current, need):
-            if need <= current:
-                return current
-            scale = 1
-            while 15 * scale < need:
-                scale *= 2
-            return max(current, next(m * scale for m in range(8, 16) if m * scale >= need))
-
-        return Capacity(*(fit(current, need) for current, need in zip(self.sizes, needed)))
-
-    @property
-    def sizes(self) -> tuple[int, int, int, int]:
-        return (self.tets, self.others, self.pairs, self.polygons)
 
 
 def calc_boxes(points):
@@ -60,33 +50,6 @@ def calc_boxes(points):
 
 def boxes_overlap(lo_a, hi_a, lo_b, hi_b):
     return jnp.all((lo_a <= hi_b) & (lo_b <= hi_a), axis=-1)
-
-
-def _cumsum(flags, block: int = 128):
-    """Inclusive prefix sum of a 1-D int array, blocked (a scan within blocks of
-    `block`, then one over the block totals): several times faster on the CPU than a
-    scan over the whole array."""
-    n = flags.shape[0]
-    if n <= block:
-        return jnp.cumsum(flags)
-    padded = -(-n // block) * block
-    blocks = jnp.concatenate([flags, jnp.zeros(padded - n, flags.dtype)]).reshape(-1, block)
-    within = jnp.cumsum(blocks, axis=1)
-    totals = within[:, -1]
-    return (within + (jnp.cumsum(totals) - totals)[:, None]).reshape(-1)[:n]
-
-
-def select(mask, capacity: int):
-    """Indices of True entries (in order), padded with -1 to `capacity`, a validity
-    mask, and the number of True entries (which may exceed capacity: overflow).
-
-    A prefix sum gives each True entry its slot; one scatter writes the indices
-    (entries past the capacity are dropped, and counted)."""
-    flags = mask.reshape(-1).astype(jnp.int32)
-    position = _cumsum(flags)
-    target = jnp.where(flags > 0, position - 1, capacity)
-    index = jnp.full(capacity, -1, jnp.int32).at[target].set(jnp.arange(flags.shape[0], dtype=jnp.int32), mode="drop")
-    return index, index >= 0, position[-1]
 
 
 def select_pairs(lo_a, hi_a, valid_a, lo_b, hi_b, valid_b, capacity: int, also=None):
@@ -99,7 +62,7 @@ def select_pairs(lo_a, hi_a, valid_a, lo_b, hi_b, valid_b, capacity: int, also=N
     overlap = overlap & valid_a[:, None] & valid_b[None, :]
     if also is not None:
         overlap = overlap & also
-    flat, valid, count = select(overlap.reshape(-1), capacity)
+    flat, valid, count = compact_indices(overlap.reshape(-1), capacity)
     num_b = lo_b.shape[0]
     safe = jnp.where(valid, flat, 0)
     return safe // num_b, safe % num_b, valid, count
@@ -172,7 +135,7 @@ def select_clusters(clusters: TetClusters, tet_points, meets, capacity: int):
     """
     members = jnp.asarray(clusters.members)
     cluster_lo, cluster_hi = calc_cluster_boxes(clusters, tet_points)
-    hit, hit_valid, num_hit = select(meets(cluster_lo, cluster_hi), max(1, capacity // clusters.cluster_size))
+    hit, hit_valid, num_hit = compact_indices(meets(cluster_lo, cluster_hi), max(1, capacity // clusters.cluster_size))
     candidates = members[jnp.maximum(hit, 0)]
     valid = hit_valid[:, None] & (candidates >= 0)
     return jnp.where(valid, candidates, -1), valid, num_hit * clusters.cluster_size

@@ -17,8 +17,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._buffers import compact_indices
 from ..field import PressureField
-from ._broadphase import Capacity, TetClusters, box_meets_plane, select, select_clusters
+from ._broadphase import Capacity, TetClusters, box_meets_plane, select_clusters
 from ._polygon import calc_polygon_integrals_columns, clip_polygon_by_tet_faces, to_polygon_rows
 from ._pose import Pose
 from ._soft_rigid import is_normal_along_gradient
@@ -133,7 +134,7 @@ def calc_half_space_surface(
         heights = vertex_heights[field.tets]
         cut = (jnp.min(heights, axis=1) <= 0.0) & (jnp.max(heights, axis=1) >= 0.0)
         size = tet_points.shape[0] if brute_force else capacity.polygons
-        tets, tets_valid, num_tets = select(jnp.ones_like(cut) if brute_force else cut, size)
+        tets, tets_valid, num_tets = compact_indices(jnp.ones_like(cut) if brute_force else cut, size)
         tet_index = jnp.maximum(tets, 0)
         tet_heights = heights[tet_index]
         near_overflow, num_near = jnp.asarray(False), jnp.asarray(0)
@@ -143,7 +144,7 @@ def calc_half_space_surface(
         near_heights = vertex_heights[field.tets[near]]
         cut = near_valid.reshape(-1) & (jnp.min(near_heights, axis=1) <= 0.0) & (jnp.max(near_heights, axis=1) >= 0.0)
         size = capacity.polygons
-        chosen, tets_valid, num_tets = select(cut, size)
+        chosen, tets_valid, num_tets = compact_indices(cut, size)
         tet_index = near[jnp.maximum(chosen, 0)]
         tet_heights = near_heights[jnp.maximum(chosen, 0)]
         near_overflow = num_near > near.shape[0]

@@ -7,6 +7,7 @@ from ..field import make_pressure_field
 from ..mesh import FREE, TetMesh
 from ._api import compute_contact_surface
 from ._pose import make_pose
+from ._probes import parse_length, parse_probe
 
 
 def calc_skin_height(mesh: TetMesh, x: float, y: float) -> float:
@@ -36,10 +37,6 @@ def press_probe(mesh: TetMesh, strain, modulus: float, probe_spec: str, at: str)
 
     **Returns:** (report dict, ContactSurface, probe, X_SP the probe's pose).
     """
-    # Imported here: hydrotact._contact_job imports this package (parse_probe and
-    # parse_length are moving into hydrotact.contact).
-    from .._contact_job import parse_length, parse_probe
-
     parts = at.split(",")
     if len(parts) != 3:
         raise HydrotactError(f"--at: expected X,Y,DEPTH (e.g. 0,2.2mm,0.5mm), got {at!r}")

@@ -7,15 +7,20 @@ tet's linear pressure and the triangle's outward normal, which is the direction 
 pressure pushes the soft body.
 """
 
+from typing import TYPE_CHECKING
+
 import jax
 import jax.numpy as jnp
 
+from .._buffers import compact_indices
 from ..field import PressureField
-from ._broadphase import Capacity, TetClusters, boxes_overlap, calc_boxes, calc_cluster_boxes, select
+from ._broadphase import Capacity, TetClusters, boxes_overlap, calc_boxes, calc_cluster_boxes
 from ._polygon import calc_polygon_integrals_columns, calc_tet_face_planes, clip_polygon_by_tet_faces_columns, to_polygon_rows
 from ._pose import Pose
-from ._rigid import RigidSurface
 from ._surface import POLYGON_CAPACITY, ContactSurface, assemble_surface
+
+if TYPE_CHECKING:  # the probes module imports this kernel
+    from ._probes import RigidSurface
 
 
 def calc_tet_pressure_planes(field: PressureField):
@@ -121,7 +126,7 @@ def _planes_may_meet(tet, triangle):
 
 def calc_soft_rigid_surface(
     field: PressureField,
-    rigid: RigidSurface,
+    rigid: "RigidSurface",
     X_SR: Pose,
     capacity: Capacity = Capacity(),
     brute_force: bool = False,
@@ -174,27 +179,27 @@ def calc_soft_rigid_surface(
         region_hi = jnp.minimum(jnp.max(cluster_hi, axis=0), jnp.max(tri_hi, axis=0))
         # Tets near the other body: clusters first, then their tets, compacted.
         num_cluster_slots = max(1, CLUSTER_SEARCH * capacity.tets // cluster_size)
-        hit, _, num_hit = select(boxes_overlap(cluster_lo, cluster_hi, region_lo[None], region_hi[None]), num_cluster_slots)
+        hit, _, num_hit = compact_indices(boxes_overlap(cluster_lo, cluster_hi, region_lo[None], region_hi[None]), num_cluster_slots)
         candidates = members[jnp.maximum(hit, 0)].reshape(-1)
         safe_candidates = jnp.maximum(candidates, 0)
         candidate_rows = tet_rows[safe_candidates]
         near_mask = (candidates >= 0) & boxes_overlap(candidate_rows[:, 12:15], candidate_rows[:, 15:18], region_lo[None], region_hi[None])
-        near, near_valid, num_near = select(near_mask, capacity.tets)
+        near, near_valid, num_near = compact_indices(near_mask, capacity.tets)
         near = jnp.maximum(near, 0)
         near_tets, near_rows = safe_candidates[near], candidate_rows[near]
-        tris, tris_valid, num_tris = select(boxes_overlap(tri_lo, tri_hi, region_lo[None], region_hi[None]), capacity.others)
+        tris, tris_valid, num_tris = compact_indices(boxes_overlap(tri_lo, tri_hi, region_lo[None], region_hi[None]), capacity.others)
         tris = jnp.maximum(tris, 0)
         tri_rows = triangle_columns[:, tris].T
         # Every near tet against every near triangle by their boxes (cheap, dense);
         # the finer plane tests only on the pairs whose boxes meet; then the survivors.
         boxes_meet = _boxes_meet(near_rows.T[:, :, None], tri_rows.T[:, None, :])
         boxes_meet = boxes_meet & near_valid[:, None] & tris_valid[None, :]
-        candidate, candidate_valid, num_candidates = select(boxes_meet, capacity.pairs)
+        candidate, candidate_valid, num_candidates = compact_indices(boxes_meet, capacity.pairs)
         candidate = jnp.maximum(candidate, 0)
         i, j = candidate // tris.shape[0], candidate % tris.shape[0]
         candidate_tets, candidate_triangles = near_rows[i].T, tri_rows[j].T  # gathers from the small near lists
         may_meet = candidate_valid & _planes_may_meet(candidate_tets, candidate_triangles)
-        chosen, pair_valid, num_polygons = select(may_meet, capacity.polygons)
+        chosen, pair_valid, num_polygons = compact_indices(may_meet, capacity.polygons)
         chosen = jnp.maximum(chosen, 0)
         tet_index, tri_index = near_tets[i[chosen]], tris[j[chosen]]
         # Gathered again from the small near lists: taking the chosen columns of the

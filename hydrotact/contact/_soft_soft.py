@@ -9,9 +9,10 @@ A pushes along (g_A - g_B) / |g_A - g_B| (into A, away from B).
 import jax
 import jax.numpy as jnp
 
+from .._buffers import compact_indices
 from .._math import safe_div
 from ..field import PressureField
-from ._broadphase import Capacity, boxes_overlap, calc_boxes, select, select_pairs
+from ._broadphase import Capacity, boxes_overlap, calc_boxes, select_pairs
 from ._half_space import slice_tet
 from ._polygon import calc_polygon_integrals, clip_polygon_by_tet_faces
 from ._pose import Pose
@@ -59,8 +60,8 @@ def calc_soft_soft_surface(
         pair_valid = jnp.ones(a.shape, dtype=bool)
         overflow, needed = jnp.asarray(False), jnp.array([points_A.shape[0], points_B.shape[0], 0, a.shape[0]])
     else:
-        tets_A, valid_A, num_A = select(boxes_overlap(lo_A, hi_A, region_lo[None], region_hi[None]), capacity.tets)
-        tets_B, valid_B, num_B = select(boxes_overlap(lo_B, hi_B, region_lo[None], region_hi[None]), capacity.others)
+        tets_A, valid_A, num_A = compact_indices(boxes_overlap(lo_A, hi_A, region_lo[None], region_hi[None]), capacity.tets)
+        tets_B, valid_B, num_B = compact_indices(boxes_overlap(lo_B, hi_B, region_lo[None], region_hi[None]), capacity.others)
         safe_A, safe_B = jnp.maximum(tets_A, 0), jnp.maximum(tets_B, 0)
         # Every overlapping pair is a polygon slot: the pairs go straight to that buffer.
         i, j, pair_valid, num_pairs = select_pairs(lo_A[safe_A], hi_A[safe_A], valid_A, lo_B[safe_B], hi_B[safe_B], valid_B, capacity.polygons)

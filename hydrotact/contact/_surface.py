@@ -17,10 +17,11 @@ class ContactSurface(eqx.Module):
     the unit normal `normals_S` along which the pressure pushes the soft body
     (for soft-soft: body A). Units: m, Pa, N.
 
-    `overflow` is True when more candidates existed than the buffers hold: the surface
-    is then incomplete, and the host entry points retry with larger buffers or raise;
-    `needed` says how many entries each buffer (tets, others, pairs, polygons) would
-    have needed.
+    `did_overflow` is True when more candidates existed than the buffers hold: the
+    surface is then incomplete, and the host entry points retry with larger buffers
+    or raise (see :func:`hydrotact._buffers.run_growing`); `needed` says how many
+    entries each buffer (tets, others, pairs, polygons: :attr:`Capacity.sizes`)
+    would have needed.
 
     **Fields:**
 
@@ -33,7 +34,7 @@ class ContactSurface(eqx.Module):
     - `first_moments_S`: (capacity, 3) int x dA; `pressure_moments_S`: (capacity, 3) int p x dA.
     - `tet_index`, `other_index`: (capacity,) the soft tet, and the rigid triangle or
       the other body's tet (-1 for a half-space).
-    - `overflow`: scalar; `needed`: (4,) entries needed by the tets, others, pairs and
+    - `did_overflow`: scalar; `needed`: (4,) entries needed by the tets, others, pairs and
       polygons buffers (see :class:`Capacity`).
     """
 
@@ -48,7 +49,7 @@ class ContactSurface(eqx.Module):
     pressure_moments_S: Float[Array, "capacity 3"]
     tet_index: Int[Array, " capacity"]
     other_index: Int[Array, " capacity"]
-    overflow: Bool[Array, ""]
+    did_overflow: Bool[Array, ""]
     needed: Int[Array, " 4"]
 
     @property
@@ -91,7 +92,7 @@ class ContactSurface(eqx.Module):
         return safe_div(moments, jnp.sum(weights, axis=-1)[..., None])
 
 
-def assemble_surface(polygons, normals_S, pair_valid, keep, tet_index, other_index, overflow, needed) -> ContactSurface:
+def assemble_surface(polygons, normals_S, pair_valid, keep, tet_index, other_index, did_overflow, needed) -> ContactSurface:
     """Fill a ContactSurface from the per-slot polygons of a kernel.
 
     `polygons` is (vertices, pressures, counts, areas, pressure integrals, first
@@ -112,6 +113,6 @@ def assemble_surface(polygons, normals_S, pair_valid, keep, tet_index, other_ind
         pressure_moments_S=pressure_moments,
         tet_index=jnp.where(pair_valid, tet_index, -1),
         other_index=jnp.where(pair_valid, other_index, -1),
-        overflow=overflow,
+        did_overflow=did_overflow,
         needed=needed,
     )

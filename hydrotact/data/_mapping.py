@@ -7,7 +7,6 @@ the column's SI unit in `barometer_log.schema.json` `$defs/columns` (channels ar
 pressures). Every value is converted on reading: SI = (raw + offset) x factor x scale.
 """
 
-import math
 import re
 from dataclasses import dataclass, field
 
@@ -15,20 +14,9 @@ import numpy as np
 
 from .._errors import HydrotactError
 from .._schemas import format_path, read_json, validate
+from .._units import SI_UNITS, UNITS
 from ._table import BarometerLog, known_columns, sensor_spec
 
-# Units a column may be declared in, per quantity kind: name -> factor to SI.
-UNITS = {
-    "time": {"s": 1.0, "ms": 1e-3, "us": 1e-6, "min": 60.0},
-    "length": {"m": 1.0, "mm": 1e-3, "um": 1e-6, "cm": 1e-2},
-    "pressure": {"Pa": 1.0, "hPa": 100.0, "kPa": 1e3, "mbar": 100.0, "bar": 1e5, "psi": 6894.757293168361},
-    "angle": {"rad": 1.0, "deg": math.pi / 180.0},
-    "force": {"N": 1.0, "mN": 1e-3},
-    "torque": {"N m": 1.0, "N mm": 1e-3},
-    "dimensionless": {"1": 1.0},
-}
-# The SI unit each kind is stored in (the units of barometer_log's $defs/columns).
-SI_UNITS = {"s": "time", "m": "length", "Pa": "pressure", "rad": "angle", "N": "force", "N m": "torque", "1": "dimensionless"}
 STEP = "step"
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 

@@ -6,9 +6,10 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import HydrotactError
+from .._units import LENGTH_UNITS
 from ._io import MESH_SUFFIXES, read_mesh
 from ._seeds import SEED_SENSORS, make_seed_mesh
-from ._surface import SURFACE_SUFFIXES, UNIT_SCALES, load_surface
+from ._surface import SURFACE_SUFFIXES, load_surface
 from ._tags import Plane
 from ._tetmesh import TetMesh
 from ._tetrahedralize import tetrahedralize
@@ -40,7 +41,7 @@ def load_tet_mesh(
         lo, hi = surface.bounds
         if edge_length is None:
             edge_length = float(np.linalg.norm(hi - lo)) / 20.0
-        z = float(lo[2]) if core_plane_z is None else core_plane_z * UNIT_SCALES[units]
+        z = float(lo[2]) if core_plane_z is None else core_plane_z * LENGTH_UNITS[units]
         return tetrahedralize(surface, edge_length, core=Plane((0.0, 0.0, z)), source=str(path))
     if path.exists():
         raise HydrotactError(

@@ -180,7 +180,7 @@ def make_truncated_ellipsoid_surface(
     )
     faces = []
     nxt = np.roll(np.arange(num_around), -1)
-    ring_start = lambda k: 1 + k * num_around  # noqa: E731 -- ring k of all rings, cap then base
+    ring_start = lambda k: 1 + k * num_around
     all_rings = len(rings) + len(base_rings)
     # Fan at the top pole.
     faces.append(np.column_stack([np.zeros(num_around, int), ring_start(0) + np.arange(num_around), ring_start(0) + nxt]))

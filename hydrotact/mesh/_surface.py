@@ -7,17 +7,16 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from .._errors import HydrotactError, where
+from .._units import LENGTH_UNITS
 from ._tetmesh import check_vertices
 
 SURFACE_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
-UNIT_SCALES = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "um": 1e-6}
-
 
 def load_surface(path, units: str = "m") -> trimesh.Trimesh:
     """Read a closed surface (STL, OBJ, PLY, ...) and scale it to metres (host)."""
     path = Path(path)
-    if units not in UNIT_SCALES:
-        raise HydrotactError(f"{path}: unknown units {units!r}; use one of {sorted(UNIT_SCALES)}")
+    if units not in LENGTH_UNITS:
+        raise HydrotactError(f"{path}: unknown units {units!r}; use one of {sorted(LENGTH_UNITS)}")
     if not path.is_file():
         raise HydrotactError(f"{path}: no such file")
     try:
@@ -26,7 +25,7 @@ def load_surface(path, units: str = "m") -> trimesh.Trimesh:
         raise HydrotactError(f"{path}: cannot read as a surface mesh ({error})") from None
     if not isinstance(surface, trimesh.Trimesh) or len(surface.faces) == 0:
         raise HydrotactError(f"{path}: contains no triangles")
-    surface.apply_scale(UNIT_SCALES[units])
+    surface.apply_scale(LENGTH_UNITS[units])
     return surface
 
 

@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import HydrotactError, where
-from .._types import Array, Int, Float
+from .._types import Array, Float, Int
 
 FREE = 0
 CORE = 1

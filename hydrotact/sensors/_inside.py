@@ -4,7 +4,6 @@ coordinates for tet meshes (host, numpy; a few points against a few thousand cel
 import numpy as np
 
 
-
 def _segment_distances(points, a, b):
     ab = b - a
     t = np.clip(np.einsum("pti,ti->pt", points[:, None] - a, ab) / np.maximum(np.einsum("ti,ti->t", ab, ab), 1e-300), 0.0, 1.0)
@@ -44,7 +43,7 @@ def calc_winding_numbers(points: np.ndarray, vertices: np.ndarray, faces: np.nda
         a, b, c = (triangles[None, :, i] - chunk[:, None] for i in range(3))
         la, lb, lc = (np.linalg.norm(v, axis=-1) for v in (a, b, c))
         det = np.einsum("pti,pti->pt", a, np.cross(b, c))
-        dot = lambda u, v: np.einsum("pti,pti->pt", u, v)  # noqa: E731
+        dot = lambda u, v: np.einsum("pti,pti->pt", u, v)
         denominator = la * lb * lc + dot(a, b) * lc + dot(b, c) * la + dot(c, a) * lb
         numbers.append(2.0 * np.arctan2(det, denominator).sum(axis=1) / (4.0 * np.pi))
     return np.concatenate(numbers) if numbers else np.zeros(0)

@@ -18,14 +18,15 @@ import numpy as np
 
 from .._errors import HydrotactError
 from .._schemas import format_path, parse_json, read_json, validate
+from .._units import LENGTH_UNITS, UNITS
 from ..mesh import SEED_SENSORS, SURFACE_SUFFIXES, TetMesh, load_surface, load_tet_mesh, make_seed_mesh, seed_surface
-from ..mesh._surface import UNIT_SCALES
 from ._builtins import BUILTIN_SENSORS
 from ._inside import find_points_outside_surface, find_points_outside_tets
 
 _DATA = files("hydrotact.sensors") / "data"
-LENGTH_SCALES = {name: UNIT_SCALES[name] for name in ("m", "mm", "um")}
-ANGLE_SCALES = {"rad": 1.0, "deg": math.pi / 180.0}
+# The length units a sensor file may use (its schema lists the same ones).
+LENGTH_SCALES = {name: LENGTH_UNITS[name] for name in ("m", "mm", "um")}
+ANGLE_SCALES = UNITS["angle"]
 # A port on the elastomer's boundary counts as inside: the surface check allows this
 # fraction of the bounding-box diagonal (round-off), the tet-mesh check fTetWild's
 # default envelope (1e-3 of the diagonal: its skin may move that far from the input).
@@ -141,7 +142,7 @@ class SensorSpec:
         if geometry.kind == "seed":
             mesh = make_seed_mesh(geometry.seed, geometry.edge_length)
         else:
-            scale = UNIT_SCALES[geometry.surface_units]
+            scale = LENGTH_UNITS[geometry.surface_units]
             mesh = load_tet_mesh(
                 geometry.path,
                 edge_length=geometry.edge_length,

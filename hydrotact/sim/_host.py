@@ -24,10 +24,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import __version__
+from .._buffers import run_growing
 from .._files import atomic_path, cache_dir, digest
 from ..contact import make_pose, map_over_poses
-from ..contact._api import grown_contact_capacity
-from ..taxel import grown_capacity
 from ..visco import BarometerSignal, Prony
 from ._model import SensorModel
 from ._simulate import Samples, SimCapacity, UnitResponse, calc_samples, calc_unit_response
@@ -41,17 +40,6 @@ _CACHE_VERSION = "unit-responses-2"
 @eqx.filter_jit
 def _chunk_response(model, probe, X_SR, capacity):
     return map_over_poses(lambda X: calc_unit_response(model, probe, X, capacity), X_SR)
-
-
-def grown_sim_capacity(capacity: SimCapacity, unit: UnitResponse) -> SimCapacity:
-    """A capacity that holds what the overflowing samples of `unit` needed (host)."""
-    contact, taxel_pairs = capacity.contact, capacity.taxel_pairs
-    contact_overflow, taxel_overflow = np.asarray(unit.contact_overflow), np.asarray(unit.taxel_overflow)
-    if contact_overflow.any():
-        contact = grown_contact_capacity(contact, np.asarray(unit.contact_needed)[contact_overflow])
-    if taxel_overflow.any():
-        taxel_pairs = grown_capacity(taxel_pairs, np.asarray(unit.taxel_needed)[taxel_overflow])
-    return SimCapacity(contact=contact, taxel_pairs=taxel_pairs)
 
 
 def compute_unit_responses(model: SensorModel, probe, X_SR, capacity: SimCapacity | None = None, chunk: int = 128, progress: bool = False):
@@ -73,11 +61,7 @@ def compute_unit_responses(model: SensorModel, probe, X_SR, capacity: SimCapacit
     for start in range(0, count, chunk):
         index = np.minimum(np.arange(start, start + chunk), count - 1)  # pad the last chunk
         poses = jax.tree_util.tree_map(lambda a, index=index: a[index], X_SR)
-        while True:
-            unit = _chunk_response(model, probe, poses, capacity)
-            if not bool(np.any(np.asarray(unit.overflow))):
-                break
-            capacity = grown_sim_capacity(capacity, unit)
+        unit, capacity = run_growing(lambda size, poses=poses: _chunk_response(model, probe, poses, size), capacity)
         used = min(chunk, count - start)
         pieces.append(jax.tree_util.tree_map(lambda a, used=used: np.asarray(a)[:used], unit))
         if bar is not None:

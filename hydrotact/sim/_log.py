@@ -167,7 +167,7 @@ def simulate_log(
 
     **Returns:** (the log, the Samples it was made from).
     """
-    from .._contact_job import parse_probe  # MERGE: from ..contact
+    from ..contact import parse_probe
     from ..sensors import SensorSpec, load_sensor
 
     spec = sensor if isinstance(sensor, SensorSpec) else load_sensor(sensor)

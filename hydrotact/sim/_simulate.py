@@ -24,13 +24,16 @@ Conventions (frame S, the sensor base frame: PCB on z = 0, +z the pad normal):
 - `contact`: |force| > 0.1 N (the threshold of that paper's labels).
 """
 
+from typing import ClassVar
+
 import equinox as eqx
 import jax.numpy as jnp
 
+from .._buffers import AbstractCapacity
 from .._math import safe_div, safe_norm
 from .._types import Array, Bool, Float, Int
 from ..contact import Capacity, Pose, calc_contact_surface, map_over_poses
-from ..taxel import calc_taxel_pressures
+from ..taxel import TaxelCapacity, calc_taxel_pressures
 from ..visco import BarometerSignal, Prony, calc_barometer_readings, calc_contact_response
 from ._model import SensorModel
 from ._trajectory import Trajectory
@@ -44,9 +47,9 @@ class UnitResponse(eqx.Module):
     **Fields:** `taxel_pressures` (num_taxels,), `force_S` (3,), `torque_S` (3,) —
     each per pascal of E; `normal_S` (3,) the inward skin normal at the contact (0
     without contact); `contact_point_S` (3,) the centre of pressure, m; `area` m^2;
-    `contact_overflow`, `taxel_overflow` (a buffer was too small) with
-    `contact_needed` (the contact surface's `needed`) and `taxel_needed`, for the
-    host to grow them.
+    `did_overflow` (a buffer was too small: the response is incomplete) and `needed`
+    (5,) the entries each buffer of :class:`SimCapacity` needed, for the host to grow
+    them (:func:`hydrotact._buffers.run_growing`).
     """
 
     taxel_pressures: Float[Array, " num_taxels"]
@@ -55,14 +58,8 @@ class UnitResponse(eqx.Module):
     normal_S: Float[Array, " 3"]
     contact_point_S: Float[Array, " 3"]
     area: Float[Array, ""]
-    contact_overflow: Bool[Array, ""]
-    taxel_overflow: Bool[Array, ""]
-    contact_needed: Int[Array, "..."]
-    taxel_needed: Int[Array, ""]
-
-    @property
-    def overflow(self):
-        return self.contact_overflow | self.taxel_overflow
+    did_overflow: Bool[Array, ""]
+    needed: Int[Array, " 5"]
 
 
 class Samples(eqx.Module):
@@ -89,19 +86,42 @@ class Samples(eqx.Module):
     contact: Bool[Array, " num_samples"]
 
 
-class SimCapacity(eqx.Module):
-    """Buffer sizes of a simulation (static): the contact broad phase's and the
-    taxel sampler's candidate pairs."""
+class SimCapacity(AbstractCapacity):
+    """Buffer sizes of a simulation (static: changing one recompiles), in the order of
+    :attr:`UnitResponse.needed`: the contact broad phase's `tets`, `others`, `pairs`
+    and `polygons` (:class:`hydrotact.contact.Capacity`), then the taxel sampler's
+    candidate `taxel_pairs` (:class:`hydrotact.taxel.TaxelCapacity`). Grown by the one
+    rule of :meth:`hydrotact._buffers.AbstractCapacity.grown_to`.
+    """
 
-    contact: Capacity = eqx.field(static=True, default=Capacity())
-    taxel_pairs: int = eqx.field(static=True, default=4096)
+    purpose: ClassVar[str] = "the simulation"
+    advice: ClassVar[str] = "the probe presses too deep, or the contact surface has too many triangles near the taxels"
+
+    tets: int = eqx.field(static=True, default=Capacity().tets)
+    others: int = eqx.field(static=True, default=Capacity().others)
+    pairs: int = eqx.field(static=True, default=Capacity().pairs)
+    polygons: int = eqx.field(static=True, default=Capacity().polygons)
+    taxel_pairs: int = eqx.field(static=True, default=TaxelCapacity().pairs)
+
+    @classmethod
+    def of(cls, contact: Capacity = Capacity(), taxel: TaxelCapacity = TaxelCapacity()) -> "SimCapacity":
+        """The capacity made of a contact capacity and a taxel capacity."""
+        return cls(*contact.sizes, *taxel.sizes)
+
+    @property
+    def contact(self) -> Capacity:
+        return Capacity(self.tets, self.others, self.pairs, self.polygons)
+
+    @property
+    def taxel(self) -> TaxelCapacity:
+        return TaxelCapacity(self.taxel_pairs)
 
 
 def calc_unit_response(model: SensorModel, probe, X_SR: Pose, capacity: SimCapacity = SimCapacity()) -> UnitResponse:
     """The unit-modulus response of the sensor to the probe at pose X_SR (pure;
     jittable, vmappable over X_SR, differentiable in X_SR, the field and the layout)."""
     surface = calc_contact_surface(model.field, probe, X_SR, capacity.contact, model.clusters)
-    readings = calc_taxel_pressures(model.layout, surface, model.num_rays, capacity.taxel_pairs)
+    readings = calc_taxel_pressures(model.layout, surface, model.num_rays, capacity.taxel)
     force_on_soft, torque_on_soft = surface.calc_wrench()
     weights = jnp.where(surface.valid, surface.pressure_integrals, 0.0)
     gradients = model.field.calc_tet_pressure_gradients()[jnp.maximum(surface.tet_index, 0)]
@@ -114,10 +134,8 @@ def calc_unit_response(model: SensorModel, probe, X_SR: Pose, capacity: SimCapac
         normal_S=inward,
         contact_point_S=surface.pressure_centroid_S,
         area=surface.total_area,
-        contact_overflow=surface.overflow,
-        taxel_overflow=readings.overflow,
-        contact_needed=surface.needed,
-        taxel_needed=readings.needed,
+        did_overflow=surface.did_overflow | readings.did_overflow,
+        needed=jnp.concatenate([surface.needed, readings.needed]),
     )
 
 
@@ -195,7 +213,7 @@ def calc_simulation(
     - `trajectory`: times and probe poses X_SR; the samples are read at its times
       (:func:`hydrotact.sim.resample_trajectory` puts it at a part's rate).
     - `capacity`: buffer sizes (static). A buffer that overflows is flagged in
-      `.unit.overflow`, never truncated silently: check it, or use
+      `.unit.did_overflow`, never truncated silently: check it, or use
       :func:`hydrotact.sim.simulate`, which grows the buffers and recomputes.
     - `barometer`, `key`: the barometer signal model and the PRNG key of its noise
       (no readings without `barometer`, no noise without `key`).

@@ -10,8 +10,8 @@ import numpy as np
 
 from .._errors import HydrotactError, where
 from .._types import Array, Float
+from .._units import LENGTH_UNITS
 from ..contact import Pose, make_pose
-from ..mesh._surface import UNIT_SCALES
 
 TRAJECTORY_COLUMNS = ("time", "x", "y", "z")
 ROTATION_COLUMNS = ("rx", "ry", "rz")
@@ -76,8 +76,8 @@ def read_trajectory(path, units: str = "m") -> Trajectory:
     `rz` (rotation vector, rad), in any order. Rows are numbered from 1 after the
     header; blank lines are skipped (but counted)."""
     path = Path(path)
-    if units not in UNIT_SCALES:
-        raise HydrotactError(f"{path}: unknown length unit {units!r}; use one of {sorted(UNIT_SCALES)}")
+    if units not in LENGTH_UNITS:
+        raise HydrotactError(f"{path}: unknown length unit {units!r}; use one of {sorted(LENGTH_UNITS)}")
     if not path.is_file():
         raise HydrotactError(f"{path}: no such trajectory file")
     try:
@@ -111,7 +111,7 @@ def read_trajectory(path, units: str = "m") -> Trajectory:
     if back.size:
         k = int(back[0]) + 1
         raise HydrotactError(f"{path}: row {numbered[k][0]}, column time: time {values[k, 0]:g} s does not increase (previous {values[k - 1, 0]:g} s)")
-    scale = UNIT_SCALES[units]
+    scale = LENGTH_UNITS[units]
     return make_trajectory(values[:, 0], values[:, 1:4] * scale, values[:, 4:7] if rotations else None, source=str(path))
 
 

@@ -128,7 +128,7 @@ def _unique_pose_responses(log, source: str, field: str, num_rays: int, progress
     """Unit responses of the log's taxels and contact force at its probe poses: each
     distinct pose is simulated once (holds repeat poses), through the simulator's
     cache of unit responses (so a log simulated by hydrotact fits at once)."""
-    from .._contact_job import parse_probe  # MERGE: from ..contact
+    from ..contact import parse_probe
     from ..sensors import load_sensor
     from ..sim import compute_trajectory_responses, make_sensor_model, make_trajectory
 

@@ -21,8 +21,8 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import HydrotactError
 from .._choices import Choice
+from .._errors import HydrotactError
 from .._math import safe_norm
 from .._types import Array, Bool, Float
 

@@ -16,18 +16,17 @@ Two paths compute the same thing:
 - **brute force**: every ray of every taxel against every triangle (the reference).
 """
 
+from typing import ClassVar
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 
-from .._errors import HydrotactError
-from .._math import compact_indices, safe_div, safe_norm, safe_sqrt
+from .._buffers import AbstractCapacity, compact_indices, run_growing
+from .._math import safe_div, safe_norm, safe_sqrt
 from .._types import Array, Bool, Float, Int
 from ._patterns import TaxelLayout, calc_taxel_rays
 from ._raycast import calc_surface_triangles, intersect_ray_triangle
-
-MAX_PAIRS = 1 << 22
 
 # A ray's hits within this relative distance of its nearest one count as the nearest
 # too, and are averaged: a ray along an edge shared by two triangles (see
@@ -38,6 +37,22 @@ MAX_PAIRS = 1 << 22
 TIE_TOLERANCE = 1e-9
 
 
+class TaxelCapacity(AbstractCapacity):
+    """Buffer sizes of the culled taxel sampler (static: changing one recompiles), in
+    the order of :attr:`TaxelReadings.needed`.
+
+    - `pairs`: candidate (taxel, surface triangle) pairs, those whose triangle's
+      bounding sphere meets the taxel's receptive volume; each is ray-cast.
+
+    Grown by the one rule of :meth:`hydrotact._buffers.AbstractCapacity.grown_to`.
+    """
+
+    purpose: ClassVar[str] = "taxel sampling"
+    advice: ClassVar[str] = "the contact surface has too many triangles near the taxels"
+
+    pairs: int = eqx.field(static=True, default=4096)
+
+
 class TaxelReadings(eqx.Module):
     """Taxel values for one contact surface.
 
@@ -46,14 +61,16 @@ class TaxelReadings(eqx.Module):
     - `pressures`: (num_taxels,) the weighted mean pressure over each receptive field,
       Pa (in the units of the surface's pressure).
     - `coverage`: (num_taxels,) the weight fraction of rays that hit, in [0, 1].
-    - `overflow`: True when the culled path had more candidate pairs than its buffer.
-    - `needed`: the number of candidate pairs it needed.
+    - `did_overflow`: True when the culled path had more candidate pairs than its
+      buffer (the readings are then incomplete).
+    - `needed`: (1,) the entries each buffer of :class:`TaxelCapacity` needed (the
+      candidate pairs).
     """
 
     pressures: Float[Array, " num_taxels"]
     coverage: Float[Array, " num_taxels"]
-    overflow: Bool[Array, ""]
-    needed: Int[Array, ""]
+    did_overflow: Bool[Array, ""]
+    needed: Int[Array, " 1"]
 
 
 def _meets_receptive_field(position, axis, size, is_cone, centres, radii):
@@ -112,7 +129,7 @@ def _aggregate(ray_pressure_sums, ray_hit_counts, weights):
 
 
 def calc_taxel_pressures(
-    layout: TaxelLayout, surface, num_rays: int = 64, capacity: int = 4096, brute_force: bool = False
+    layout: TaxelLayout, surface, num_rays: int = 64, capacity: TaxelCapacity = TaxelCapacity(), brute_force: bool = False
 ) -> TaxelReadings:
     """Taxel readings of a contact surface (pure; jittable, vmappable, and
     differentiable in the surface's vertices and pressures and in the layout).
@@ -122,8 +139,8 @@ def calc_taxel_pressures(
     - `layout`: the taxels (positions, axes, receptive fields), frame S.
     - `surface`: a :class:`hydrotact.contact.ContactSurface` in frame S.
     - `num_rays`: rays per receptive field (static).
-    - `capacity`: candidate (taxel, triangle) pairs of the culled path (static);
-      check `.overflow` or use :func:`sample_taxels`, which does.
+    - `capacity`: the culled path's buffer of candidate (taxel, triangle) pairs
+      (static); check `.did_overflow` or use :func:`sample_taxels`, which grows it.
     - `brute_force`: every ray against every triangle (the reference; never overflows).
     """
     corners, corner_pressures, valid = calc_surface_triangles(surface)
@@ -140,15 +157,14 @@ def calc_taxel_pressures(
 
         sums, counts = jax.lax.map(one_taxel, (origins, directions))
         pressures, coverage = _aggregate(sums, counts, weights)
-        return TaxelReadings(pressures, coverage, jnp.asarray(False), jnp.asarray(valid.shape[0] * layout.num_taxels))
+        return TaxelReadings(pressures, coverage, jnp.asarray(False), jnp.asarray([valid.shape[0] * layout.num_taxels]))
 
     num_taxels = layout.num_taxels
     centres = jnp.mean(corners, axis=1)
     radii = jnp.max(safe_norm(corners - centres[:, None], axis=-1), axis=1)
     meets = _meets_receptive_field(layout.positions_S.T, layout.axes_S.T, layout.field_sizes, layout.is_cone, centres.T, radii)
     meets = jax.lax.stop_gradient(meets & valid[None, :])
-    flat, needed = compact_indices(meets.reshape(-1), capacity)
-    pair_valid = flat >= 0
+    flat, pair_valid, needed = compact_indices(meets, capacity.pairs)
     safe = jnp.maximum(flat, 0)
     # Compaction keeps row-major order, so pairs come sorted by taxel; padding goes to
     # the last taxel (with no hits) to keep them sorted for the segment reductions.
@@ -166,34 +182,21 @@ def calc_taxel_pressures(
     sums = jax.ops.segment_sum(jnp.where(nearest, pressure, 0.0), **segments)
     counts = jax.ops.segment_sum(nearest.astype(jnp.int32), **segments)
     pressures, coverage = _aggregate(sums, counts, weights)
-    return TaxelReadings(pressures, coverage, needed > capacity, needed)
-
-
-def grown_capacity(capacity: int, needed) -> int:
-    """The next power-of-two multiple of `capacity` that holds `needed` pairs (host),
-    or a clear error past MAX_PAIRS."""
-    needed = int(np.max(np.asarray(needed)))
-    if needed > MAX_PAIRS:
-        raise HydrotactError(f"taxel sampling needs more than {MAX_PAIRS} candidate (taxel, triangle) pairs ({needed})")
-    while capacity < needed:
-        capacity *= 2
-    return capacity
+    return TaxelReadings(pressures, coverage, needed > capacity.pairs, needed[None])
 
 
 _readings = eqx.filter_jit(calc_taxel_pressures)
 _batched_readings = eqx.filter_jit(eqx.filter_vmap(calc_taxel_pressures, in_axes=(None, 0, None, None)))
 
 
-def sample_taxels(layout: TaxelLayout, surface, num_rays: int = 64, capacity: int = 4096) -> tuple[TaxelReadings, int]:
+def sample_taxels(
+    layout: TaxelLayout, surface, num_rays: int = 64, capacity: TaxelCapacity | None = None
+) -> tuple[TaxelReadings, TaxelCapacity]:
     """Taxel readings of one surface or a batch (a surface with a leading axis),
-    growing the pair buffer until nothing overflows (host).
+    growing the pair buffer until nothing overflows (host;
+    :func:`hydrotact._buffers.run_growing`).
 
     **Returns:** (readings, the capacity that sufficed).
     """
-    batched = surface.counts.ndim == 2
-    run = _batched_readings if batched else _readings
-    while True:
-        readings = run(layout, surface, num_rays, capacity)
-        if not bool(np.any(np.asarray(readings.overflow))):
-            return readings, capacity
-        capacity = grown_capacity(capacity, readings.needed)
+    run = _batched_readings if surface.counts.ndim == 2 else _readings
+    return run_growing(lambda size: run(layout, surface, num_rays, size), capacity or TaxelCapacity())

@@ -1,5 +1,8 @@
 """Pictures: pyvista renders and matplotlib plots. Never imported by the stages."""
 
 from ._fit import plot_fit as plot_fit
-from ._plots import plot_log as plot_log, save_figure as save_figure
-from ._render import render_contact as render_contact, render_field as render_field, render_mesh as render_mesh
+from ._plots import plot_log as plot_log
+from ._plots import save_figure as save_figure
+from ._render import render_contact as render_contact
+from ._render import render_field as render_field
+from ._render import render_mesh as render_mesh

@@ -3,10 +3,9 @@
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
 
-from .._files import atomic_path  # noqa: E402
+from .._files import atomic_path
 
 
 def save_figure(figure, path) -> None:

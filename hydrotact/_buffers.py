@@ -1,0 +1,177 @@
+"""Fixed-capacity buffers: their sizes, compaction into them, and growing them.
+
+Kernels whose results vary in size (contact polygons, candidate pairs) write them
+into buffers of a fixed, static capacity, as jax-md's neighbour lists do: a jitted
+kernel compacts its candidates into each buffer with :func:`compact_indices`, and
+reports on its result `did_overflow` (some buffer was too small: the result is
+incomplete) and `needed` (how many entries each buffer would have needed, in the
+order of its capacity's `sizes`). The host then grows the capacity
+(:meth:`AbstractCapacity.grown_to`) and recomputes, which :func:`run_growing` does
+until nothing overflows. A result is never silently truncated.
+
+One growth rule serves every kernel: each buffer grows to the smallest size of the
+form m 2^k with 8 <= m <= 15 that holds what it needed (at most 12.5 % more than
+needed, and few distinct sizes to compile), never below its current size; counts
+that fit every buffer although the result overflowed (a buffer whose count the
+kernel cannot report exactly) grow every buffer by 2x; past :data:`MAX_BUFFER`
+entries in one buffer the host raises a :class:`HydrotactError`.
+"""
+
+import dataclasses
+from collections.abc import Callable
+from typing import Any, ClassVar, Self, TypeVar
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from ._errors import HydrotactError
+
+MAX_BUFFER = 1 << 22
+"""The most entries any one buffer may grow to (4,194,304)."""
+
+# Masks at least this long are compacted by a binary search over their running count,
+# shorter ones by a blocked prefix sum and one scatter (see compact_indices).
+SEARCH_FROM = 1 << 17
+
+_Capacity = TypeVar("_Capacity", bound="AbstractCapacity")
+
+
+def _fit(current: int, need: int) -> int:
+    """The smallest m 2^k (8 <= m <= 15) that holds `need`, but at least `current`."""
+    if need <= current:
+        return current
+    scale = 1
+    while 15 * scale < need:
+        scale *= 2
+    return max(current, next(m * scale for m in range(8, 16) if m * scale >= need))
+
+
+class AbstractCapacity(eqx.Module):
+    """Buffer sizes of one kernel (abstract): static int fields, one per buffer, in
+    the order of the kernel's `needed` (changing one recompiles the kernel).
+
+    Subclasses declare their buffers as `eqx.field(static=True, default=...)` int
+    fields and set the class variables `purpose` (what fills the buffers, for the
+    error past :data:`MAX_BUFFER`, e.g. "the contact") and optionally `advice` (what
+    such an overflow usually means).
+    """
+
+    purpose: ClassVar[str] = "a kernel"
+    advice: ClassVar[str] = ""
+
+    @property
+    def sizes(self) -> tuple[int, ...]:
+        """Each buffer's size, in field order."""
+        return tuple(getattr(self, field.name) for field in dataclasses.fields(self))
+
+    def grown_to(self, needed) -> Self:
+        """The capacity to retry with after an overflow (host).
+
+        Each buffer is rounded up to the smallest m 2^k (8 <= m <= 15) that holds its
+        entry of `needed`, never below its current size; where that changes nothing
+        (the counts fit, yet the result overflowed) every buffer doubles.
+
+        **Arguments:**
+
+        - `needed`: entries each buffer needed, shaped like `sizes`; rows of several
+          results (a leading batch axis) take their maximum.
+
+        **Returns:** a capacity of the same type.
+
+        **Raises:** :class:`HydrotactError` when a buffer would need more than
+        :data:`MAX_BUFFER` entries.
+        """
+        names = [field.name for field in dataclasses.fields(self)]
+        needed = np.asarray(needed, dtype=np.int64).reshape(-1, len(names))
+        needed = np.max(needed, axis=0) if needed.shape[0] else np.zeros(len(names), np.int64)
+        for name, need in zip(names, needed.tolist()):
+            if need > MAX_BUFFER:
+                raise HydrotactError(
+                    f"{self.purpose} needs more than {MAX_BUFFER} entries in its {name} buffer "
+                    f"({need} found){'; ' + self.advice if self.advice else ''}"
+                )
+        grown = type(self)(**{name: _fit(size, need) for name, size, need in zip(names, self.sizes, needed.tolist())})
+        if grown == self:  # counts that do not map onto one buffer: grow them all
+            if any(2 * size > MAX_BUFFER for size in self.sizes):
+                raise HydrotactError(
+                    f"{self.purpose} overflows its buffers {dict(zip(names, self.sizes))} although "
+                    f"the counts fit them, and doubling them passes {MAX_BUFFER} entries"
+                )
+            grown = type(self)(**{name: 2 * size for name, size in zip(names, self.sizes)})
+        return grown
+
+
+def run_growing(compute: Callable[[_Capacity], Any], capacity: _Capacity) -> tuple[Any, _Capacity]:
+    """Call `compute(capacity)`, growing the capacity and recomputing until its
+    result does not overflow (host).
+
+    The result must have `did_overflow` (a bool, or bools with leading batch axes)
+    and `needed` (shaped like `capacity.sizes`, after the same batch axes). After an
+    overflow the capacity grows (:meth:`AbstractCapacity.grown_to`) to the largest
+    count each buffer needed among the rows that overflowed.
+
+    **Arguments:**
+
+    - `compute`: capacity -> result; usually a jitted kernel (each new capacity
+      compiles it once more).
+    - `capacity`: the sizes to try first.
+
+    **Returns:** (the result that fitted, the capacity that sufficed; reuse it for
+    similar inputs to avoid recompiling).
+    """
+    while True:
+        result = compute(capacity)
+        did_overflow = np.asarray(result.did_overflow)
+        if not did_overflow.any():
+            return result, capacity
+        needed = np.asarray(result.needed)
+        capacity = capacity.grown_to(needed[did_overflow] if did_overflow.ndim else needed)
+
+
+def _blocked_cumsum(flags, block: int = 128):
+    """Inclusive prefix sum of a 1-D int array, blocked (a scan within blocks of
+    `block`, then one over the block totals): several times faster on the CPU than a
+    scan over the whole array."""
+    n = flags.shape[0]
+    if n <= block:
+        return jnp.cumsum(flags)
+    padded = -(-n // block) * block
+    blocks = jnp.concatenate([flags, jnp.zeros(padded - n, flags.dtype)]).reshape(-1, block)
+    within = jnp.cumsum(blocks, axis=1)
+    totals = within[:, -1]
+    return (within + (jnp.cumsum(totals) - totals)[:, None]).reshape(-1)[:n]
+
+
+def compact_indices(mask, size: int):
+    """Indices of the True entries of a mask, in order, padded with -1 to `size`:
+    `jnp.nonzero(mask.ravel(), size=size, fill_value=-1)`, with the overflow counted.
+
+    Two exact methods, chosen by the mask's length (static): below `SEARCH_FROM`
+    entries, a blocked prefix sum gives each True entry its slot and one scatter
+    writes the indices (entries past `size` are dropped, and counted); from it on, a
+    running count and a binary search for each output slot (O(n + size log n), no
+    scatter), which measured 10-30 % faster on the CPU for the taxel and large
+    contact masks (1.7e5 to 1e6 entries), singly and vmapped over 16 poses, and
+    slower for masks of 5e3 to 6.6e4 entries vmapped. Both give the same indices.
+
+    **Arguments:**
+
+    - `mask`: bool array of any shape (flattened in row-major order).
+    - `size`: the buffer's capacity (static).
+
+    **Returns:** (indices (size,) int32, -1 past the last True entry; valid (size,)
+    bool, the slot holds an index; count, int32 scalar: the number of True entries,
+    which exceeds `size` when the buffer overflows).
+    """
+    flags = mask.reshape(-1).astype(jnp.int32)
+    if flags.shape[0] >= SEARCH_FROM:
+        counts = jnp.cumsum(flags)
+        slots = jnp.arange(1, size + 1, dtype=counts.dtype)
+        found = jnp.searchsorted(counts, slots, side="left", method="scan_unrolled").astype(jnp.int32)
+        index = jnp.where(slots <= counts[-1], found, -1)
+        return index, index >= 0, counts[-1]
+    position = _blocked_cumsum(flags)
+    target = jnp.where(flags > 0, position - 1, size)
+    index = jnp.full(size, -1, jnp.int32).at[target].set(jnp.arange(flags.shape[0], dtype=jnp.int32), mode="drop")
+    return index, index >= 0, position[-1]
