@@ -182,5 +182,5 @@ def test_sphere8_log_is_unchanged():
     """A tilted Ø6 mm sphere pressed off-axis into sphere8 and slid (elastomer
     pressures, viscoelastic): the columns recorded before."""
     trajectory = read_trajectory(DATA / "sphere_traj.csv")
-    log, _ = simulate_log("sphere8", "sphere:r=3mm", trajectory, _demo_truth(), num_rays=24, cache=False)
+    log, _ = simulate_log("sphere8", make_sphere_probe(3e-3), trajectory, _demo_truth(), num_rays=24, cache=False)
     _assert_same_log(log, "sphere")
