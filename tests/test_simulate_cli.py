@@ -284,7 +284,15 @@ def test_interrupted_run_resumes(tmp_path, monkeypatch, reference):
     assert not _partial(output).exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["log.parquet", "traj.csv"]
 
-    # Interrupted again on the last block: two blocks saved, one left.
+    # The finished run's unit responses are cached: the same run again computes none.
+    output.unlink()
+    cached = _Counting()
+    _run(trajectory, output, monkeypatch, cached)
+    assert cached.calls == 0
+    _assert_same_log(read_log(output), reference)
+
+    # Interrupted again on the last block (an empty cache): two blocks saved, one left.
+    monkeypatch.setenv("HYDROTACT_CACHE_DIR", str(tmp_path.parent / f"{tmp_path.name}-second-cache"))
     output.unlink()
     late = _Counting(fail_on=3)
     with pytest.raises(KeyboardInterrupt):
