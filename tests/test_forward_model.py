@@ -66,10 +66,10 @@ def arguments(pad_model):
     # rounded reading, which central differences would see
     signal = eqx.tree_at(lambda s: s.lsb, _barometer(pad_model), jnp.asarray(0.0))
     trajectory = _press()
-    # buffers that hold every pose: a truncated buffer would make the readings jump
-    _, capacity = compute_unit_responses(pad_model, SPHERE, trajectory.X_SR)
-    samples = calc_simulation(pad_model, _material(), SPHERE, trajectory, capacity, barometer=signal)
-    assert not bool(np.any(np.asarray(samples.unit.did_overflow)))
+    # buffers that hold every pose (grown until nothing overflows): a truncated buffer
+    # would make the readings jump
+    unit, capacity = compute_unit_responses(pad_model, SPHERE, trajectory.X_SR)
+    assert not np.any(unit.did_overflow) and np.max(unit.taxel_pressures) > 0.0
     return (pad_model, _material(), trajectory, signal, capacity)
 
 
@@ -122,7 +122,7 @@ def test_jit_vmap_over_trajectories_and_no_recompile(pad_model):
     first, second = _press(), _press(PAD_TOP + 0.1e-3)
     # buffers that hold both trajectories' poses (the pure call flags, never grows them)
     both_poses = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), first.X_SR, second.X_SR)
-    _, capacity = compute_unit_responses(pad_model, probe, both_poses)
+    _, capacity = compute_unit_responses(pad_model, probe, both_poses, chunk=first.num_samples)  # the chunks simulate() compiles below
 
     @eqx.filter_jit
     @eqx.debug.assert_max_traces(max_traces=1)
@@ -139,7 +139,7 @@ def test_jit_vmap_over_trajectories_and_no_recompile(pad_model):
         np.testing.assert_allclose(batched.readings[k], single.readings, rtol=0, atol=1e-9)
         np.testing.assert_allclose(batched.force_S[k], single.force_S, rtol=1e-12, atol=1e-15)
     # the host entry gives the same samples (chunks, distinct poses, no cache)
-    host = simulate(pad_model, material, probe, first, barometer=signal, key=jax.random.PRNGKey(0), cache=False)
+    host = simulate(pad_model, material, probe, first, barometer=signal, key=jax.random.PRNGKey(0), capacity=capacity, cache=False)
     np.testing.assert_allclose(host.readings, one.readings, rtol=0, atol=1e-9)
     np.testing.assert_allclose(host.taxel_pressures, one.taxel_pressures, rtol=1e-12, atol=1e-9)
     # pressing: the centre taxels read, the contact pushes, the force points down
