@@ -90,7 +90,8 @@ def make_barometer_log(
     absolute readings `samples.readings`); the probe pose (`probe_x`.. m,
     `probe_rx`.. rad); the wrench on the sensor (`fx`.. N, with the load-cell noise of
     `barometer` drawn from `rng`; `tx`.. N m); `fn`; `theta`, `phi` where the sensor
-    defines a contact centre; `contact`. The metadata say how it was simulated.
+    defines a contact centre; `contact`. The metadata say how it was simulated
+    (`probe`: the probe's spec string, left out when it has none).
     """
     columns = {"time": np.asarray(samples.times, dtype=np.float64)}
     pressures = samples.taxel_pressures if barometer is None else samples.readings
@@ -120,7 +121,7 @@ def make_barometer_log(
         "pressure": "elastic" if barometer is None else "absolute",
         "channels": list(spec.taxel_names),
         "generator": f"hydrotact {__version__}",
-        "probe": probe,
+        **({"probe": probe} if probe else {}),  # a probe loaded from a mesh has no spec to name it
         "material": material_metadata(material),
         "field": str(StrainFieldKind.parse(field_kind, "field kind")),
         "num_rays": int(num_rays),
