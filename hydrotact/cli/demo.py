@@ -68,11 +68,12 @@ def run_demo(out_dir, progress: bool = True, smoke: bool = False) -> dict:
     """Simulate the demo log, fit it, write everything into out_dir; returns the
     summary (also out_dir/summary.json). `smoke`: two presses, two Prony terms
     (0.3 s, 3 s), 16 rays: the same job at test-suite size."""
-    from ..data import make_material_document, material_prony, write_log, write_material
+    from ..data import make_material_document, material_prony, write_material
     from ..sim import BarometerSettings, make_trajectory, simulate_log
     from ..sysid import fit_logs
-    from ..viz import plot_fit, plot_log
+    from ..viz import plot_fit
     from .fit import print_fit_table
+    from .simulate import write_simulated_log
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -96,13 +97,7 @@ def run_demo(out_dir, progress: bool = True, smoke: bool = False) -> dict:
         num_rays=16 if smoke else 32, barometer=barometer, progress=progress,
     )
     log_path = out_dir / "demo_log.parquet"
-    write_log(log_path, log)
-    plot_log(log, out_dir / "demo_log.png", title=f"pad5x5: {probe}, E(0) = {float(samples.modulus):g} Pa")
-    simulated = {
-        "sensor": "pad5x5", "probe": probe, "num_samples": log.num_samples, "num_taxels": len(log.metadata["channels"]),
-        "samples_in_contact": int(np.sum(samples.contact)), "max_normal_force_N": float(np.max(samples.normal_force, initial=0.0)),
-        "max_taxel_pressure_Pa": float(np.max(samples.taxel_pressures, initial=0.0)), "log": str(log_path), "png": str(out_dir / "demo_log.png"),
-    }
+    simulated = write_simulated_log(log, samples, log_path, out_dir / "demo_log.png")
     # step 4 is what a user runs on their own log: `hydrotact fit demo_log.parquet`
     report = fit_logs([log_path], out_dir / "fit", terms=2 if smoke else "auto", progress=progress, plot=plot_fit)
     gains = {f"pad5x5/{name}": g for name, g in zip(log.metadata["channels"], log.metadata["barometer"]["gains"])}

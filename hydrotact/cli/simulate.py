@@ -63,7 +63,7 @@ def run_simulate(
     With `material` (a material.json), the material is viscoelastic; with `barometer`,
     the log holds absolute barometer readings (sim.BarometerSettings). Returns a
     report dict."""
-    from ..data import material_prony, read_material, write_log
+    from ..data import material_prony, read_material
     from ..sim import BarometerSettings, read_trajectory, simulate_log
     from ..visco import make_prony
 
@@ -76,8 +76,8 @@ def run_simulate(
     if barometer:
         settings = BarometerSettings(seed=seed, noise_rms=noise_rms, gain_spread=gain_spread, offset_spread=offset_spread, force_noise=force_noise)
     else:
-        given = [flag for flag, value in (("--noise", noise_rms), ("--gain-spread", gain_spread or None), ("--offset-spread",
-            offset_spread or None), ("--force-noise", force_noise or None)) if value is not None]
+        options = (("--noise", noise_rms), ("--gain-spread", gain_spread or None), ("--offset-spread", offset_spread or None), ("--force-noise", force_noise or None))
+        given = [flag for flag, value in options if value is not None]
         if given:
             raise HydrotactError(f"{given[0]}: applies to barometer readings; add --barometer")
     if material is not None:
@@ -87,15 +87,25 @@ def run_simulate(
     trajectory = read_trajectory(trajectory_path, units=units)
     partial = checkpoint_path(output)
     log, samples = simulate_log(sensor, probe_spec, trajectory, material, field_kind=field, num_rays=num_rays, barometer=settings, progress=progress, checkpoint=partial)
-    write_log(output, log)
+    report = write_simulated_log(log, samples, output, png)
     partial.unlink(missing_ok=True)
+    return report
+
+
+def write_simulated_log(log, samples, output, png=None) -> dict:
+    """Write a simulated log (Parquet) and, with `png`, the plot of its traces;
+    returns the report `hydrotact simulate` prints."""
+    from ..data import write_log
+
+    write_log(output, log)
+    probe = log.metadata.get("probe", "")
     if png is not None:
         from ..viz import plot_log
 
-        plot_log(log, png, title=f"{log.metadata['sensor']}: {probe_spec}, E(0) = {float(material.instantaneous_modulus):g} Pa")
+        plot_log(log, png, title=f"{log.metadata['sensor']}: {probe}, E(0) = {float(samples.modulus):g} Pa")
     return {
         "sensor": log.metadata["sensor"],
-        "probe": probe_spec,
+        "probe": probe,
         "num_samples": log.num_samples,
         "num_taxels": len(log.metadata["channels"]),
         "samples_in_contact": int(np.sum(samples.contact)),

@@ -42,9 +42,10 @@ def _chunk_response(model, probe, X_SR, capacity):
     return map_over_poses(lambda X: calc_unit_response(model, probe, X, capacity), X_SR)
 
 
-def compute_unit_responses(model: SensorModel, probe, X_SR, capacity: SimCapacity | None = None, chunk: int = 128, progress: bool = False):
+def compute_unit_responses(model: SensorModel, probe, X_SR, capacity: SimCapacity | None = None, chunk: int = 128):
     """Unit responses for a batch of poses, in jitted chunks of `chunk` poses, growing
-    buffers (and recomputing the chunk) whenever one overflows (host).
+    buffers (and recomputing the chunk) whenever one overflows (host; progress is
+    shown per block by :func:`compute_pose_responses`).
 
     **Returns:** (UnitResponse with a leading sample axis, as NumPy arrays; the
     capacity that sufficed).
@@ -53,21 +54,12 @@ def compute_unit_responses(model: SensorModel, probe, X_SR, capacity: SimCapacit
     count = X_SR.translation.shape[0]
     chunk = max(1, min(chunk, count))
     pieces = []
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=count, unit="sample", desc=f"simulating {model.name}", leave=False)
     for start in range(0, count, chunk):
         index = np.minimum(np.arange(start, start + chunk), count - 1)  # pad the last chunk
         poses = jax.tree_util.tree_map(lambda a, index=index: a[index], X_SR)
         unit, capacity = run_growing(lambda size, poses=poses: _chunk_response(model, probe, poses, size), capacity)
         used = min(chunk, count - start)
         pieces.append(jax.tree_util.tree_map(lambda a, used=used: np.asarray(a)[:used], unit))
-        if bar is not None:
-            bar.update(used)
-    if bar is not None:
-        bar.close()
     unit = jax.tree_util.tree_map(lambda *parts: np.concatenate(parts), *pieces)
     return unit, capacity
 

@@ -81,18 +81,19 @@ def make_barometer_log(
     field_kind: StrainFieldKind | str = StrainFieldKind.LAPLACE,
     num_rays: int = 64,
     barometer: BarometerSettings | None = None,
-    signal: BarometerSignal | None = None,
-    rng: np.random.Generator | None = None,
 ) -> BarometerLog:
     """A BarometerLog of simulated samples (host).
 
     Columns: time; one per taxel (the elastomer pressure, or with `barometer` the
-    absolute readings `samples.readings`); the probe pose (`probe_x`.. m,
-    `probe_rx`.. rad); the wrench on the sensor (`fx`.. N, with the load-cell noise of
-    `barometer` drawn from `rng`; `tx`.. N m); `fn`; `theta`, `phi` where the sensor
+    absolute readings `samples.readings`, simulated with `barometer.draw`'s signal);
+    the probe pose (`probe_x`.. m, `probe_rx`.. rad); the wrench on the sensor (`fx`..
+    N, with the load-cell noise of `barometer`; `tx`.. N m); `fn`; `theta`, `phi` where the sensor
     defines a contact centre; `contact`. The metadata say how it was simulated
     (`probe`: the probe's spec string, left out when it has none).
     """
+    signal = rng = None
+    if barometer is not None:  # the same draws the readings were simulated with (one seed)
+        signal, rng = barometer.draw(spec.part, spec.num_taxels)
     columns = {"time": np.asarray(samples.times, dtype=np.float64)}
     pressures = samples.taxel_pressures if barometer is None else samples.readings
     for k, name in enumerate(spec.taxel_names):
@@ -176,12 +177,12 @@ def simulate_log(
         probe_spec, probe = probe, parse_probe(probe)
     else:
         probe_spec = probe.spec
-    signal = rng = key = None
+    signal = key = None
     if barometer is not None:
         trajectory = resample_trajectory(trajectory, spec.part.rate_hz)
-        signal, rng = barometer.draw(spec.part, spec.num_taxels)
+        signal, _ = barometer.draw(spec.part, spec.num_taxels)
         key = barometer.key
     model = make_sensor_model(spec, field_kind=field_kind, num_rays=num_rays)
     samples = simulate(model, material, probe, trajectory, barometer=signal, key=key, progress=progress, checkpoint=checkpoint, cache=cache)
-    log = make_barometer_log(spec, samples, trajectory, probe=probe_spec, material=material, field_kind=field_kind, num_rays=num_rays, barometer=barometer, signal=signal, rng=rng)
+    log = make_barometer_log(spec, samples, trajectory, probe=probe_spec, material=material, field_kind=field_kind, num_rays=num_rays, barometer=barometer)
     return log, samples

@@ -22,9 +22,9 @@ from ._fit import (
 from ._fit import (
     make_initial_guess as make_initial_guess,
 )
-from ._job import fit_logs as fit_logs
-from ._job import parse_terms as parse_terms
-from ._job import read_logs as read_logs
+from ._fit_logs import fit_logs as fit_logs
+from ._fit_logs import parse_terms as parse_terms
+from ._fit_logs import read_logs as read_logs
 from ._model import ParameterLayout as ParameterLayout
 from ._model import calc_predictions as calc_predictions
 from ._model import calc_residuals as calc_residuals

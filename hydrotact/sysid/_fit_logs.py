@@ -1,5 +1,5 @@
-"""The fit job: barometer logs -> a fitted material, a report and (given a plotter)
-pictures.
+"""Fitting logs end to end: barometer logs -> a fitted material, a report and
+(given a plotter) pictures.
 
 Everything the user gave is read and checked before anything is written; the outputs
 (material.json, report.json, PNGs) are each written atomically into the output folder.
