@@ -378,3 +378,124 @@ def test_contact_query_delegates_to_the_probe():
     assert eqx.tree_equal(by_query, by_probe) and int(by_query.num_polygons) > 0
     half = calc_contact_surface(field, HalfSpace(), X)
     assert eqx.tree_equal(half, calc_half_space_surface(field, X))
+
+
+# --- Ties: probe faces on layers of tet faces, planes on layers of vertices ----------
+
+PAD_TOP = 4e-3
+PAD_LAYERS = np.arange(1, 8) * 0.5e-3  # pad5x5's inner vertex layers, as depths below the top
+
+
+def _tie_probes():
+    """(label, probe, rotation vector) for the tie sweeps: the half-space, the upright
+    and tilted 2 mm cylinder, a box whose bottom and side faces lie on the pad's
+    vertex planes (x and y every 0.55 mm) when centred, and a box pressed edge first."""
+    tilt = np.array([np.deg2rad(15.0), np.deg2rad(10.0), 0.0])
+    return [
+        ("half-space", HalfSpace(), np.zeros(3)),
+        ("upright cylinder", make_cylinder_probe(2e-3), np.zeros(3)),
+        ("tilted cylinder", make_cylinder_probe(2e-3), tilt),
+        ("box on the vertex planes", make_box_probe((2.2e-3, 2.2e-3, 2e-3)), np.zeros(3)),
+        ("edge-first box", make_box_probe((3e-3, 3e-3, 2e-3)), np.array([np.pi / 4, 0.0, 0.0])),
+    ]
+
+
+def _lowest_point(probe, rotation_vector):
+    """How far below R's origin the probe reaches along S's z when rotated."""
+    if isinstance(probe, HalfSpace):
+        return 0.0
+    rotation = np.asarray(make_pose(np.zeros(3), rotation_vector).rotation)
+    return float(np.min(np.asarray(probe.vertices_R) @ rotation.T, axis=0)[2])
+
+
+def _poses_at_depths(probe, rotation_vector, depths, xy=(0.0, 0.0)):
+    """Poses that put the probe's lowest point `depths` below the pad's top."""
+    heights = PAD_TOP - np.asarray(depths) - _lowest_point(probe, rotation_vector)
+    translations = np.column_stack([np.full_like(heights, xy[0]), np.full_like(heights, xy[1]), heights])
+    return jax.vmap(make_pose)(jnp.asarray(translations), jnp.asarray(np.broadcast_to(rotation_vector, translations.shape)))
+
+
+@pytest.fixture(scope="module")
+def pad_field():
+    mesh = make_seed_mesh("pad5x5")
+    field = make_pressure_field(mesh, calc_distance_field(mesh), E)
+    return mesh, field, make_tet_clusters(field.vertices, field.tets)
+
+
+@pytest.mark.parametrize("case", range(5), ids=[label for label, _, _ in _tie_probes()])
+def test_contact_is_continuous_through_every_vertex_layer(pad_field, case):
+    """Depth sweeps through each inner vertex layer of pad5x5 (every 0.5 mm): the
+    force and area change across the layer by no more than in the steps beside it;
+    where a probe face lies exactly on a layer of tet faces (the half-space, the
+    upright cylinder's tip, the box's bottom and sides), the value there is the mean of
+    the poses 1 nm to either side, to 1e-6 (before the tie rule: twice that)."""
+    _, field, clusters = pad_field
+    label, probe, rotation = _tie_probes()[case]
+    # Rigid meshes follow Drake's 5 pi / 8 rule, which drops the tip's polygons past
+    # the pressure ridge at the pad's mid-plane (2 mm): their sweeps stop above it.
+    layers = PAD_LAYERS if isinstance(probe, HalfSpace) else PAD_LAYERS[PAD_LAYERS < 2e-3]
+    step = 2e-6
+    offsets = np.array([-2 * step, -step, -1e-9, 0.0, 1e-9, step, 2 * step])
+    depths = (layers[:, None] + offsets[None]).reshape(-1)
+    surfaces, _ = compute_contact_surface(field, probe, _poses_at_depths(probe, rotation, depths), clusters=clusters)
+    force = np.asarray(jax.vmap(lambda s: s.calc_force())(surfaces))
+    normal_force = -force[:, 2].reshape(len(layers), -1)
+    area = np.asarray(surfaces.total_area).reshape(len(layers), -1)
+    assert np.all(normal_force > 0), (label, normal_force)
+    for name, values in (("force", normal_force), ("area", area)):
+        change = np.abs(np.diff(values[:, [0, 1, 3, 5, 6]], axis=1))  # steps of 2 um; the layer between steps 1 and 2
+        beside = np.maximum(change[:, 0], change[:, 3])
+        across = np.maximum(change[:, 1], change[:, 2])
+        allowed = 1.5 * beside + 1e-9 * np.abs(values).max(axis=1)
+        assert np.all(across <= allowed), f"{label}: {name} jumps at layers {layers[across > allowed] * 1e3} mm: {across} vs {beside}"
+        if label in ("half-space", "upright cylinder", "box on the vertex planes"):
+            np.testing.assert_allclose(values[:, 3], 0.5 * (values[:, 2] + values[:, 4]), rtol=1e-6, err_msg=f"{label}: {name} on the layers")
+
+
+def test_ties_match_brute_force():
+    """At poses exactly on vertex and face layers, the culled query (clusters included)
+    gives the same polygons as slicing or clipping every tet."""
+    mesh = make_seed_mesh("pad5x5", 1e-3)  # vertex layers every 1 mm, 4,704 tets
+    field = make_pressure_field(mesh, calc_distance_field(mesh), E)
+    clusters = make_tet_clusters(field.vertices, field.tets, cluster_size=16)
+    depths = [1e-3, 2e-3, 2.47e-3, 3e-3]
+    poses = _poses_at_depths(HalfSpace(), np.zeros(3), depths)
+    brute = jax.vmap(lambda X: calc_half_space_surface(field, X, brute_force=True))(poses)
+    culled = jax.vmap(lambda X: calc_half_space_surface(field, X, Capacity(4096, 0, 0, 4096), clusters=clusters))(poses)
+    probes = [
+        (make_box_probe((2e-3, 2e-3, 2e-3)), np.zeros(3)),
+        (make_cylinder_probe(2e-3, length=3e-3, num_sides=12), np.array([0.26, 0.17, 0.0])),
+        (make_box_probe((3e-3, 3e-3, 2e-3)), np.array([np.pi / 4, 0.0, 0.0])),
+    ]
+    pairs = [(culled, brute)]
+    for probe, rotation in probes:
+        poses = _poses_at_depths(probe, rotation, depths[:2])
+        brute = jax.vmap(lambda X, probe=probe: calc_soft_rigid_surface(field, probe, X, brute_force=True))(poses)
+        culled = jax.vmap(lambda X, probe=probe: calc_soft_rigid_surface(field, probe, X, Capacity(1024, 256, 16384, 4096), clusters=clusters))(poses)
+        pairs.append((culled, brute))
+    for culled, brute in pairs:
+        for k in range(culled.counts.shape[0]):
+            one = jax.tree.map(lambda a, k=k: a[k], (culled, brute))
+            _assert_same_surface(*one)
+            assert int(one[1].num_polygons) > 0
+
+
+def test_gradients_at_and_beside_ties(pad_field, rng):
+    """Gradients in the pose are finite on a tie and 1 nm off it; away from the layers
+    they equal central differences."""
+    mesh, field, clusters = pad_field
+    capacity = Capacity(1024, 512, 16384, 8192)
+    for label, probe, rotation in _tie_probes()[:4]:
+
+        def summary(translation, rotation_vector, probe=probe):
+            surface = calc_contact_surface(field, probe, make_pose(translation, rotation_vector), capacity, clusters)
+            force, torque = surface.calc_wrench(jnp.array([0.0, 0.0, PAD_TOP]))
+            return jnp.concatenate([force, 1e3 * torque, jnp.array([surface.total_area * 1e6])])
+
+        for depth in (1e-3, 1e-3 + 1e-9, 1e-3 - 1e-9):
+            X = jax.tree.map(lambda a: a[0], _poses_at_depths(probe, rotation, [depth]))
+            assert not bool(calc_contact_surface(field, probe, X, capacity, clusters).did_overflow)
+            jacobian = jax.jacrev(summary, argnums=(0, 1))(X.translation, jnp.asarray(rotation))
+            assert all(np.all(np.isfinite(np.asarray(j))) for j in jacobian), (label, depth)
+        X = jax.tree.map(lambda a: a[0], _poses_at_depths(probe, rotation, [0.73e-3], xy=(0.13e-3, -0.07e-3)))
+        _check_jacobians(summary, (X.translation, jnp.asarray(rotation) + 0.01), steps=(1e-8, 1e-5), rng=rng)

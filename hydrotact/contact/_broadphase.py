@@ -105,14 +105,27 @@ def _like(vector, boxes):
     return jnp.reshape(vector, (1,) * (boxes.ndim - 1) + (3,))
 
 
+# A box passes the plane test when the plane comes within this fraction of the
+# coordinates' magnitude of it (a picometre at centimetre scale). The box's reach
+# along the normal and the vertex heights the kernel cuts by are sums of different
+# products, each rounded: a box whose face lies exactly on the plane (a vertex layer
+# of a structured mesh) must never be rejected by that last bit, since its tets are
+# the ones whose faces the plane cuts. Letting in a box that is a picometre away
+# costs only its tets' (empty) sections.
+PLANE_TOLERANCE = 1e-10
+
+
 def box_meets_plane(point, normal):
-    """A box test for :func:`select_clustered_tets`: the plane passes through the box."""
+    """A box test for :func:`select_clusters`: the plane (point, unit normal) passes
+    through the box or touches it, within PLANE_TOLERANCE of the coordinates'
+    magnitude (never rejects a box the plane touches)."""
 
     def meets(lo, hi):
         centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
         distance = jnp.sum((centre - _like(point, centre)) * _like(normal, centre), axis=-1)
         reach = jnp.sum(half * _like(jnp.abs(normal), half), axis=-1)
-        return jnp.abs(distance) <= reach
+        magnitude = jnp.maximum(jnp.max(jnp.maximum(jnp.abs(lo), jnp.abs(hi)), axis=-1), jnp.max(jnp.abs(point)))
+        return jnp.abs(distance) <= reach + PLANE_TOLERANCE * magnitude
 
     return meets
 

@@ -13,7 +13,6 @@ every polygon winds counter-clockwise about the push direction.
 """
 
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -22,7 +21,6 @@ from ..field import PressureField
 from ._broadphase import Capacity, TetClusters, box_meets_plane, select_clusters
 from ._polygon import calc_polygon_integrals_columns, clip_polygon_by_tet_faces, to_polygon_rows
 from ._pose import Pose
-from ._soft_rigid import is_normal_along_gradient
 from ._surface import POLYGON_CAPACITY, ContactSurface, assemble_surface
 
 TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
@@ -121,6 +119,15 @@ def calc_half_space_surface(
     (pure, jittable, vmappable over X_SR, differentiable). `brute_force` slices every
     tet (the reference for the culling); `clusters` makes the tet search hierarchical.
 
+    Convention (Drake's soft-volume / rigid-half-space query): the section of *every*
+    tet the plane cuts counts, whatever the angle between the push direction and the
+    tet's pressure gradient. The soft-mesh / rigid-mesh query
+    (:func:`calc_soft_rigid_surface`) instead drops polygons whose normal is more than
+    5 pi / 8 from the gradient, as Drake's does. The two agree until the plane passes
+    a ridge of the pressure field, where the gradient turns away from the push (the
+    pad5x5 mid-plane with the distance field): past it the half-space keeps the
+    whole section, as Drake does.
+
     The cut tets go to the `polygons` buffer; with clusters, the clusters whose boxes
     the plane crosses fill the `tets` buffer first.
     """
@@ -153,7 +160,6 @@ def calc_half_space_surface(
         [tet_points.reshape(-1, 12), field.vertex_pressures[field.tets], field.calc_tet_pressure_gradients()], axis=1
     )
     rows = tet_rows[tet_index].T  # (19, size)
-    gradients = rows[16:19].T
     vertices, pressures, counts = slice_tets_marching_columns(
         jnp.transpose(rows[:12].reshape(4, 3, -1), (1, 0, 2)), rows[12:16], tet_heights.T, push
     )
@@ -161,7 +167,7 @@ def calc_half_space_surface(
     vertices, pressures = to_polygon_rows(vertices, pressures, POLYGON_CAPACITY)
     polygons = (vertices, pressures, counts, area, integral, first_moment.T, pressure_moment.T)
     normals = jnp.broadcast_to(push[None], (size, 3))
-    keep = jax.vmap(is_normal_along_gradient, in_axes=(None, 0))(push, gradients)
+    keep = jnp.ones(size, dtype=bool)  # Drake's half-space convention: every cut tet counts
     overflow = (num_tets > size) | near_overflow
     needed = jnp.array([num_near, 0, 0, num_tets])
     return assemble_surface(polygons, normals, tets_valid, keep, tet_index, jnp.full(size, -1), overflow, needed)

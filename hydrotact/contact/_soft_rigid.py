@@ -124,6 +124,48 @@ def _planes_may_meet(tet, triangle):
     return meet
 
 
+def _resolve_face_ties(tet, triangle):
+    """The tie rule for a rigid triangle lying in the plane of a tet face (rows as in
+    :func:`_planes_may_meet`, one pair per column).
+
+    A triangle in the plane of a face shared by two tets lies, to round-off, inside
+    both, and clipping would give each the whole piece: the pressure counted twice (a
+    flat probe face on a vertex layer of a structured mesh). The rule keeps it in
+    exactly one: the tet on the side the triangle's normal points to (out of the rigid
+    body, into the soft body it pushes), which is never clipped by that face; the tet
+    on the other side drops it. The pressure is continuous across the shared face, so
+    the surface is the limit of the poses just off the tie from either side.
+
+    "In the plane" means all three corners within SEPARATION_TOLERANCE times the
+    coordinates' magnitude of it (a picometre at centimetre scale): far above the
+    round-off of the pose transform and the face plane, far below any real offset.
+    Off the tie the clipping decides as usual, and a piece of one tet that the
+    tolerance hands to its neighbour has a thickness below the tolerance.
+
+    **Returns:** (the face planes to clip by (4, 4, P), with the kept tie faces moved
+    out of the way; which pairs the rule drops (P,)).
+    """
+    planes = tet[18:34].reshape(4, 4, -1)
+    scale = SEPARATION_TOLERANCE * jnp.maximum(tet[38], triangle[34])
+    drop = jnp.zeros(planes.shape[-1], dtype=bool)
+    offsets = []
+    for f in range(4):
+        normal, offset, length = planes[f, :3], planes[f, 3], tet[34 + f]
+        off_plane = None
+        for v in range(3):
+            d = jnp.abs(jnp.sum(normal * triangle[3 * v : 3 * v + 3], axis=0) - offset)
+            off_plane = d if off_plane is None else jnp.maximum(off_plane, d)
+        tie = jax.lax.stop_gradient(off_plane <= scale * length)
+        # The tet lies behind its outward face normal: on the triangle normal's side
+        # when the two point against each other.
+        behind = jnp.sum(normal * triangle[15:18], axis=0) < 0.0
+        drop = drop | (tie & ~behind)
+        # A kept tie face clips nothing: its plane moves out by the tet's own size.
+        margin = jax.lax.stop_gradient(tet[38] * length)
+        offsets.append(jnp.where(tie, offset + margin, offset))
+    return planes.at[:, 3].set(jnp.stack(offsets)), drop
+
+
 def calc_soft_rigid_surface(
     field: PressureField,
     rigid: "RigidSurface",
@@ -220,12 +262,13 @@ def calc_soft_rigid_surface(
     num_polygons_slots = tet_index.shape[0]
     normals = pair_triangles[15:18]  # (3, P)
     corners = jnp.transpose(pair_triangles[:9].reshape(3, 3, num_polygons_slots), (1, 0, 2))  # (3 coordinates, 3 corners, P)
-    vertices, counts = clip_polygon_by_tet_faces_columns(corners, jnp.full(tri_index.shape, 3), pair_tets[18:34].reshape(4, 4, -1))
+    face_planes, tie_drop = _resolve_face_ties(pair_tets, pair_triangles)
+    vertices, counts = clip_polygon_by_tet_faces_columns(corners, jnp.full(tri_index.shape, 3), face_planes)
     pair_gradients = pair_tets[40:43]
     pressures = pair_tets[39][None] + jnp.sum(vertices * pair_gradients[:, None], axis=0)
     pressures = jnp.where(jnp.arange(vertices.shape[1])[:, None] < counts[None], pressures, 0.0)
     area, integral, first_moment, pressure_moment = calc_polygon_integrals_columns(vertices, counts, pressures, normals)
     vertices, pressures = to_polygon_rows(vertices, pressures, POLYGON_CAPACITY)
     polygon = (vertices, pressures, counts, area, integral, first_moment.T, pressure_moment.T)
-    keep = jax.vmap(is_normal_along_gradient)(normals.T, pair_gradients.T)
+    keep = jax.vmap(is_normal_along_gradient)(normals.T, pair_gradients.T) & ~tie_drop
     return assemble_surface(polygon, normals.T, pair_valid, keep, tet_index, tri_index, overflow, needed)
