@@ -113,6 +113,6 @@ def test_capacity_shrinks_to_a_batch_far_below_it():
     _, capacity = run_growing(compute(np.array([[900, 5000], [10, 20]])), _Pair())
     assert capacity == _Pair(960, 5120)
     result, capacity = run_growing(compute(np.array([[30, 50], [10, 20]])), capacity)  # a small batch after the big one
-    assert capacity == _Pair(30, 56) and not result.did_overflow.any()
+    assert capacity == _Pair(30, 52) and not result.did_overflow.any()
     _, capacity = run_growing(compute(np.array([[200, 50]])), capacity)  # and growing again, never truncated
-    assert capacity == _Pair(208, 56)
+    assert capacity == _Pair(208, 52)
