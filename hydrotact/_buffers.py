@@ -14,7 +14,11 @@ form m 2^k with 8 <= m <= 15 that holds what it needed (at most 12.5 % more than
 needed, and few distinct sizes to compile), never below its current size; counts
 that fit every buffer although the result overflowed (a buffer whose count the
 kernel cannot report exactly) grow every buffer by 2x; past :data:`MAX_BUFFER`
-entries in one buffer the host raises a :class:`HydrotactError`.
+entries in one buffer the host raises a :class:`HydrotactError`. Buffers also
+shrink: after a result that fits, a buffer more than :data:`SHRINK_BELOW` times
+larger than the same rounding of what it needed is cut to that size
+(:meth:`AbstractCapacity.fitted_to`), so one large input does not slow every later
+one, and the sizes stay few.
 """
 
 import dataclasses
@@ -29,6 +33,10 @@ from ._errors import HydrotactError
 
 MAX_BUFFER = 1 << 22
 """The most entries any one buffer may grow to (4,194,304)."""
+
+SHRINK_BELOW = 4
+"""A buffer shrinks after a result that fits when it is more than this many times the
+size that would hold what it needed (a margin against growing back at once)."""
 
 # Masks at least this long are compacted by a binary search over their running count,
 # shorter ones by a blocked prefix sum and one scatter (see compact_indices).
@@ -102,14 +110,40 @@ class AbstractCapacity(eqx.Module):
         return grown
 
 
+    def fitted_to(self, needed) -> Self:
+        """The capacity to keep after a result that did not overflow (host).
+
+        A buffer more than :data:`SHRINK_BELOW` times the smallest m 2^k (8 <= m <=
+        15) that holds its entry of `needed` shrinks to that size; the others keep
+        theirs.
+
+        **Arguments:**
+
+        - `needed`: entries each buffer needed, shaped like `sizes`; rows of several
+          results (a leading batch axis) take their maximum.
+
+        **Returns:** a capacity of the same type (this one when nothing shrinks).
+        """
+        names = [field.name for field in dataclasses.fields(self)]
+        needed = np.asarray(needed, dtype=np.int64).reshape(-1, len(names))
+        if not needed.shape[0]:
+            return self
+        fitted = [_fit(0, need) for need in np.max(needed, axis=0).tolist()]
+        sizes = [fit if size > SHRINK_BELOW * fit else size for size, fit in zip(self.sizes, fitted)]
+        return self if tuple(sizes) == self.sizes else type(self)(**dict(zip(names, sizes)))
+
+
 def run_growing(compute: Callable[[_Capacity], Any], capacity: _Capacity) -> tuple[Any, _Capacity]:
     """Call `compute(capacity)`, growing the capacity and recomputing until its
-    result does not overflow (host).
+    result does not overflow (host); the capacity returned is fitted to that result.
 
     The result must have `did_overflow` (a bool, or bools with leading batch axes)
     and `needed` (shaped like `capacity.sizes`, after the same batch axes). After an
     overflow the capacity grows (:meth:`AbstractCapacity.grown_to`) to the largest
-    count each buffer needed among the rows that overflowed.
+    count each buffer needed among the rows that overflowed. The result that fits is
+    returned with the capacity cut to its needs where it is far larger
+    (:meth:`AbstractCapacity.fitted_to`): a batch after a large one then runs with
+    buffers sized for itself, not for the largest input ever met.
 
     **Arguments:**
 
@@ -117,14 +151,14 @@ def run_growing(compute: Callable[[_Capacity], Any], capacity: _Capacity) -> tup
       compiles it once more).
     - `capacity`: the sizes to try first.
 
-    **Returns:** (the result that fitted, the capacity that sufficed; reuse it for
+    **Returns:** (the result that fitted, the capacity fitted to it; reuse it for
     similar inputs to avoid recompiling).
     """
     while True:
         result = compute(capacity)
         did_overflow = np.asarray(result.did_overflow)
         if not did_overflow.any():
-            return result, capacity
+            return result, capacity.fitted_to(result.needed)
         needed = np.asarray(result.needed)
         capacity = capacity.grown_to(needed[did_overflow] if did_overflow.ndim else needed)
 

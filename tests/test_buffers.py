@@ -97,3 +97,22 @@ def test_compaction_flattens_a_2d_mask(rng):
     mask = rng.random((25, 40)) < 0.2
     index, _, count = compact_indices(jnp.asarray(mask), 400)
     np.testing.assert_array_equal(np.asarray(index)[: int(count)], np.flatnonzero(mask))
+
+
+def test_capacity_shrinks_to_a_batch_far_below_it():
+    assert Capacity(4096, 512, 8192, 2048).fitted_to([[100, 20, 900, 300], [90, 30, 2000, 400]]) == Capacity(104, 30, 8192, 416)  # pairs: 8192 is not more than 4 x 2048
+    assert _Pair(40, 208).fitted_to([12, 60]) == _Pair(40, 208)  # within SHRINK_BELOW of the needs: kept
+    assert _Pair(40, 208).fitted_to(np.zeros((0, 2))) == _Pair(40, 208)
+
+    def compute(needs):
+        def run(capacity):
+            return _Result(np.any(needs > np.array(capacity.sizes)[None], axis=1), needs)
+
+        return run
+
+    _, capacity = run_growing(compute(np.array([[900, 5000], [10, 20]])), _Pair())
+    assert capacity == _Pair(960, 5120)
+    result, capacity = run_growing(compute(np.array([[30, 50], [10, 20]])), capacity)  # a small batch after the big one
+    assert capacity == _Pair(30, 52) and not result.did_overflow.any()
+    _, capacity = run_growing(compute(np.array([[200, 50]])), capacity)  # and growing again, never truncated
+    assert capacity == _Pair(208, 52)

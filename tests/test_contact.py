@@ -1,6 +1,7 @@
 """Contact surfaces: closed forms, broad phase vs brute force, gradients, edge cases,
 and the probes' spec strings."""
 
+import functools
 import re
 
 import equinox as eqx
@@ -8,6 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import trimesh
 
 from hydrotact import HydrotactError
 from hydrotact.contact import (
@@ -23,6 +25,7 @@ from hydrotact.contact import (
     make_box_probe,
     make_cylinder_probe,
     make_pose,
+    make_rigid_surface,
     make_sphere_probe,
     make_tet_clusters,
     parse_length,
@@ -211,6 +214,7 @@ def test_polygon_integrals_of_a_linear_pressure():
     np.testing.assert_allclose(float(moment[0]), 1 / 6 + 1 / 6 + 1 / 8, rtol=1e-14)
 
 
+@functools.cache
 def _pad_setup():
     mesh = make_seed_mesh("pad5x5", 0.8e-3)
     return mesh, calc_distance_field(mesh)
@@ -484,10 +488,10 @@ def test_gradients_at_and_beside_ties(pad_field, rng):
     """Gradients in the pose are finite on a tie and 1 nm off it; away from the layers
     they equal central differences."""
     mesh, field, clusters = pad_field
-    capacity = Capacity(1024, 512, 16384, 8192)
     for label, probe, rotation in _tie_probes()[:4]:
+        _, capacity = compute_contact_surface(field, probe, _poses_at_depths(probe, rotation, [1e-3 - 1e-9, 1e-3, 0.73e-3]), clusters=clusters)
 
-        def summary(translation, rotation_vector, probe=probe):
+        def summary(translation, rotation_vector, probe=probe, capacity=capacity):
             surface = calc_contact_surface(field, probe, make_pose(translation, rotation_vector), capacity, clusters)
             force, torque = surface.calc_wrench(jnp.array([0.0, 0.0, PAD_TOP]))
             return jnp.concatenate([force, 1e3 * torque, jnp.array([surface.total_area * 1e6])])
@@ -499,3 +503,68 @@ def test_gradients_at_and_beside_ties(pad_field, rng):
             assert all(np.all(np.isfinite(np.asarray(j))) for j in jacobian), (label, depth)
         X = jax.tree.map(lambda a: a[0], _poses_at_depths(probe, rotation, [0.73e-3], xy=(0.13e-3, -0.07e-3)))
         _check_jacobians(summary, (X.translation, jnp.asarray(rotation) + 0.01), steps=(1e-8, 1e-5), rng=rng)
+
+
+def _one_piece_cylinder(diameter, length, num_sides=48):
+    """The cylinder of make_cylinder_probe as it was built before its wall was cut
+    into rings: each side a single quad, two triangles the probe's whole length."""
+    radius = diameter / 2
+    angles = np.linspace(0.0, 2 * np.pi, num_sides, endpoint=False)
+    ring = np.column_stack([radius * np.cos(angles), radius * np.sin(angles)])
+    vertices = np.concatenate([np.column_stack([ring, np.zeros(num_sides)]), np.column_stack([ring, np.full(num_sides, length)]), [[0, 0, 0], [0, 0, length]]])
+    i = np.arange(num_sides)
+    j = (i + 1) % num_sides
+    n = num_sides
+    faces = np.concatenate([np.column_stack([np.full(n, 2 * n), j, i]), np.column_stack([np.full(n, 2 * n + 1), n + i, n + j]), np.column_stack([i, j, n + j]), np.column_stack([i, n + j, n + i])])
+    return make_rigid_surface((vertices, faces))
+
+
+def _one_piece_box(size):
+    surface = trimesh.creation.box(extents=size)
+    surface.apply_translation([0.0, 0.0, size[2] / 2])
+    return make_rigid_surface(surface)
+
+
+TILTED = (0.26113296, 0.17353392, -0.02284617)  # 15 degrees about x, then 10 about y
+
+
+def _pressed_poses(probe, rotation_vectors, top=4e-3, depth=0.4e-3):
+    """Poses with each rotation, the probe's lowest point `depth` below `top`, at two places."""
+    translations, rotations = [], []
+    for rotation_vector in rotation_vectors:
+        turned = np.asarray(probe.vertices_R) @ np.asarray(make_pose((0, 0, 0), rotation_vector).rotation).T
+        for x in (-1.3e-3, 0.7e-3):
+            translations.append([x, 0.4 * x, top - depth - turned[:, 2].min()])
+            rotations.append(rotation_vector)
+    return jax.vmap(make_pose)(jnp.asarray(translations), jnp.asarray(rotations))
+
+
+@pytest.mark.parametrize(
+    "probe, one_piece, rotation_vectors",
+    [
+        (make_cylinder_probe(2e-3), _one_piece_cylinder(2e-3, 10e-3), [(0.0, 0.0, 0.0), TILTED]),
+        (make_box_probe((4e-3, 4e-3, 2e-3)), _one_piece_box((4e-3, 4e-3, 2e-3)), [(0.0, 0.0, 0.0), (np.pi / 4, 0.0, 0.0)]),
+    ],
+    ids=["cylinder", "box"],
+)
+def test_probes_cut_into_pieces_press_like_one_piece_faces(probe, one_piece, rotation_vectors):
+    mesh, strain = _pad_setup()
+    field = make_pressure_field(mesh, strain, E)
+    clusters = make_tet_clusters(mesh.vertices, mesh.tets)
+    X_SR = _pressed_poses(probe, rotation_vectors)
+    totals = []
+    for rigid in (probe, one_piece):  # a capacity that fits both: one compilation each
+        surface, _ = compute_contact_surface(field, rigid, X_SR, Capacity(512, 256, 8192, 1024), clusters)
+        force, torque = jax.vmap(lambda s: s.calc_wrench())(surface)
+        totals.append((np.asarray(force), np.asarray(torque), np.asarray(surface.total_area), np.asarray(surface.needed)))
+    (force, torque, area, _), (force_one, torque_one, area_one, _) = totals
+    assert np.all(np.abs(force[:, 2]) > 1e-3)  # every pose presses
+    np.testing.assert_allclose(force, force_one, rtol=1e-11, atol=1e-13 * np.abs(force).max())
+    np.testing.assert_allclose(torque, torque_one, rtol=1e-11, atol=1e-13 * np.abs(torque).max())
+    np.testing.assert_allclose(area, area_one, rtol=1e-11)
+    # Turned, the pieces keep the buffers near those of the upright probe (rows: two
+    # upright poses, two turned); the one-piece faces' long boxes do not.
+    upright, turned = np.max(totals[0][3][:2], axis=0), np.max(totals[0][3][2:], axis=0)
+    assert np.all(turned <= 1.5 * upright + 16), (upright, turned)
+    if probe.spec.startswith("cylinder"):
+        assert np.max(totals[1][3][2:, 2]) > 2 * turned[2]  # the pairs the long wall triangles needed

@@ -34,6 +34,12 @@ from ._surface import ContactSurface
 
 CYLINDER_SIDES = 48
 SPHERE_SUBDIVISIONS = 3
+PIECE_LENGTH = 0.5
+"""The longest piece of a built-in probe's flat faces, in units of its middle extent
+(a cylinder's diameter, a box's middle edge): the side wall of the 2 mm cylinder is
+rings 1 mm high, a 4 x 4 x 2 mm box's faces a grid of 2 mm squares. Smaller pieces
+give the broad phase tighter boxes (fewer candidate pairs) and more triangles to
+transform and test; the end faces' fans (edges half a diameter) set the scale."""
 
 
 class AbstractProbe(eqx.Module):
@@ -144,7 +150,15 @@ def _positive(name, value):
 def make_cylinder_probe(diameter: float, length: float | None = None, num_sides: int = CYLINDER_SIDES) -> RigidSurface:
     """A flat-ended cylinder (the 5x5-array probe is 2 mm across), tip face on z = 0,
     axis along +z; `length` defaults to 5 diameters. Spec
-    'cylinder:d=2mm[,length=10mm][,sides=48]'."""
+    'cylinder:d=2mm[,length=10mm][,sides=48]'.
+
+    The end faces are fans of `num_sides` triangles from their centres; the side wall
+    is a stack of rings, none longer than :data:`PIECE_LENGTH` diameters, each ring
+    `num_sides` quads split into two triangles. A wall of single full-length
+    triangles is the same surface, but a tilted probe's long triangles have boxes
+    that reach far into the soft body, and the broad phase pairs each with every tet
+    in its box.
+    """
     spec = f"cylinder:d={format_length(_positive('diameter', diameter))}"
     spec += "" if length is None else f",length={format_length(_positive('length', length))}"
     spec += "" if num_sides == CYLINDER_SIDES else f",sides={num_sides}"
@@ -152,20 +166,26 @@ def make_cylinder_probe(diameter: float, length: float | None = None, num_sides:
     length = 5 * 2 * radius if length is None else _positive("length", length)
     if num_sides < 3:
         raise HydrotactError(f"a cylinder needs at least 3 sides, got {num_sides}")
+    num_rings = int(np.ceil(length / (PIECE_LENGTH * 2 * radius) - 1e-9))
     angles = np.linspace(0.0, 2 * np.pi, num_sides, endpoint=False)
     ring = np.column_stack([radius * np.cos(angles), radius * np.sin(angles)])
-    bottom = np.column_stack([ring, np.zeros(num_sides)])
-    top = np.column_stack([ring, np.full(num_sides, length)])
-    vertices = np.concatenate([bottom, top, [[0, 0, 0], [0, 0, length]]])
+    heights = np.linspace(0.0, length, num_rings + 1)
+    heights[-1] = length
+    rings = [np.column_stack([ring, np.full(num_sides, z)]) for z in heights]
+    vertices = np.concatenate([*rings, [[0, 0, 0], [0, 0, length]]])
     i = np.arange(num_sides)
     j = (i + 1) % num_sides
-    centre_bottom, centre_top = 2 * num_sides, 2 * num_sides + 1
+    centre_bottom, centre_top = (num_rings + 1) * num_sides, (num_rings + 1) * num_sides + 1
+    top = num_rings * num_sides
+    walls = []
+    for level in range(num_rings):
+        low, high = level * num_sides, (level + 1) * num_sides
+        walls += [np.column_stack([low + i, low + j, high + j]), np.column_stack([low + i, high + j, high + i])]
     faces = np.concatenate(
         [
             np.column_stack([np.full(num_sides, centre_bottom), j, i]),  # tip face, normal -z
-            np.column_stack([np.full(num_sides, centre_top), num_sides + i, num_sides + j]),
-            np.column_stack([i, j, num_sides + j]),
-            np.column_stack([i, num_sides + j, num_sides + i]),
+            np.column_stack([np.full(num_sides, centre_top), top + i, top + j]),
+            *walls,
         ]
     )
     return make_rigid_surface((vertices, faces), source="cylinder probe", spec=spec)
@@ -184,10 +204,33 @@ def make_sphere_probe(radius: float, subdivisions: int = SPHERE_SUBDIVISIONS) ->
 
 def make_box_probe(size: tuple[float, float, float]) -> RigidSurface:
     """A box with the given edge lengths (x, y, z), its bottom face centred on R's
-    origin. Spec 'box:x=4mm,y=4mm,z=2mm'."""
+    origin. Spec 'box:x=4mm,y=4mm,z=2mm'.
+
+    Each face is a grid of squares split into two triangles each, the grid's pieces
+    no longer than :data:`PIECE_LENGTH` times the box's middle edge length (a 4 x 4 x
+    2 mm box: 2 x 2 squares of 2 mm on its 4 x 4 mm faces, 2 x 1 on the others): the same surface as two
+    triangles a face, but a box pressed edge or corner first then pairs each tet
+    only with the pieces near it (see :func:`make_cylinder_probe`).
+    """
     size = [_positive("box size", s) for s in size]
     spec = "box:" + ",".join(f"{axis}={format_length(s)}" for axis, s in zip("xyz", size))
-    surface = trimesh.creation.box(extents=size)
+    piece = PIECE_LENGTH * sorted(size)[1]
+    counts = [int(np.ceil(s / piece - 1e-9)) for s in size]
+    ticks = [np.linspace(-s / 2, s / 2, n + 1) for s, n in zip(size, counts)]
+    vertices, faces = [], []
+    for axis in range(3):
+        u, v = (axis + 1) % 3, (axis + 2) % 3  # (u, v, axis) right-handed
+        for side in (-1.0, 1.0):
+            grid_u, grid_v = np.meshgrid(ticks[u], ticks[v], indexing="ij")
+            points = np.zeros(grid_u.shape + (3,))
+            points[..., u], points[..., v], points[..., axis] = grid_u, grid_v, side * size[axis] / 2
+            index = len(vertices) + np.arange(grid_u.size).reshape(grid_u.shape)
+            vertices += points.reshape(-1, 3).tolist()
+            a, b, c, d = index[:-1, :-1], index[1:, :-1], index[1:, 1:], index[:-1, 1:]
+            quads = [a, b, c, d] if side > 0 else [a, d, c, b]  # counter-clockwise seen from outside
+            faces += np.stack([quads[0], quads[1], quads[2]], axis=-1).reshape(-1, 3).tolist()
+            faces += np.stack([quads[0], quads[2], quads[3]], axis=-1).reshape(-1, 3).tolist()
+    surface = trimesh.Trimesh(np.asarray(vertices), np.asarray(faces), process=True)  # merges the shared edges' vertices
     surface.apply_translation([0.0, 0.0, size[2] / 2])
     return make_rigid_surface(surface, source="box probe", spec=spec)
 

@@ -183,7 +183,8 @@ def calc_soft_rigid_surface(
     `clusters` (from :func:`make_tet_clusters`) makes the tet search hierarchical.
 
     Broad phase: the tets (found through their clusters) and the triangles whose
-    boxes meet both bodies' boxes (`tets`, `others` buffers); then every such tet
+    boxes meet the region where the bodies can touch, the soft body's box cut to the
+    box of the triangles that meet it (`tets`, `others` buffers); then every such tet
     against every such triangle by their boxes, at once (the pairs whose boxes meet
     fill the `pairs` buffer); on those pairs only, the triangle's plane, the tet's
     face planes and the triangle's edge planes (:func:`_planes_may_meet`); the pairs
@@ -217,8 +218,13 @@ def calc_soft_rigid_surface(
         cluster_size = clusters.cluster_size
         cluster_lo, cluster_hi = calc_cluster_boxes(clusters, tet_points)
         tri_lo, tri_hi = triangle_columns[9:12].T, triangle_columns[12:15].T
-        region_lo = jnp.maximum(jnp.min(cluster_lo, axis=0), jnp.min(tri_lo, axis=0))
-        region_hi = jnp.minimum(jnp.max(cluster_hi, axis=0), jnp.max(tri_hi, axis=0))
+        # The region: the soft body's box, cut to the box of the triangles that meet it
+        # (a triangle that meets a tet meets the soft body's box, at a point of both).
+        soft_lo, soft_hi = jnp.min(cluster_lo, axis=0), jnp.max(cluster_hi, axis=0)
+        touching = boxes_overlap(tri_lo, tri_hi, soft_lo[None], soft_hi[None])[:, None]
+        big = jnp.asarray(jnp.inf, dtype)
+        region_lo = jnp.maximum(soft_lo, jnp.min(jnp.where(touching, tri_lo, big), axis=0))
+        region_hi = jnp.minimum(soft_hi, jnp.max(jnp.where(touching, tri_hi, -big), axis=0))
         # Tets near the other body: clusters first, then their tets, compacted.
         num_cluster_slots = max(1, CLUSTER_SEARCH * capacity.tets // cluster_size)
         hit, _, num_hit = compact_indices(boxes_overlap(cluster_lo, cluster_hi, region_lo[None], region_hi[None]), num_cluster_slots)
