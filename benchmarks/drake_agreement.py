@@ -1,7 +1,9 @@
 """Measure how closely hydrotact's contact surfaces agree with Drake's.
 
-The cases of tests/test_contact_drake.py (which asserts 1e-6), printed as the largest
-relative differences in total area, force vector and centroid.
+The cases of tests/test_contact_drake.py (which asserts 1e-9): the first ones, then
+the tilted, edge-first, off-axis and past-the-mid-plane poses of
+`drake_reference.OFF_AXIS_CASES`; printed as the relative differences in total area,
+force vector and centroid.
 Run: `.venv/bin/python benchmarks/drake_agreement.py`.
 """
 
@@ -16,7 +18,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "tests"))
-from drake_reference import drake_contact_surfaces, integrate_drake_surface, pressing_plane_pose  # noqa: E402
+from drake_reference import OFF_AXIS_CASES, drake_contact_surfaces, integrate_drake_surface, off_axis_case, pressing_plane_pose  # noqa: E402
 
 from hydrotact.contact import HalfSpace, compute_contact_surface, make_cylinder_probe, make_pose  # noqa: E402
 from hydrotact.field import calc_distance_field, make_pressure_field  # noqa: E402
@@ -56,6 +58,9 @@ def main():
         X_SB = make_pose([1.0e-3, 0.5e-3, 9.2e-3], [0.3, -0.2, 0.1])
         cases.append(("two soft balls (soft-soft)", field_a, field_b, X_SB,
                       lambda: drake_contact_surfaces(path_a, MODULUS, str(path_b), X_WO=np.asarray(X_SB.as_matrix()), other_modulus=MODULUS)))
+        for label in OFF_AXIS_CASES:
+            field, other, X, drake_surfaces = off_axis_case(label, scratch, MODULUS)
+            cases.append((label, field, other, X, lambda drake_surfaces=drake_surfaces: drake_surfaces))
         print("| case | polygons (ours / Drake) | area rel. diff | force rel. diff | centroid rel. diff |")
         print("|---|---:|---:|---:|---:|")
         for label, field, other, X, drake in cases:

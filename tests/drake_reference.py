@@ -105,3 +105,45 @@ def pressing_plane_pose(height):
     X[:3, :3] = np.diag([1.0, -1.0, -1.0])
     X[2, 3] = height
     return X
+
+
+# Poses the first agreement tests never tried (issue 12): tilted and edge-first probes,
+# spheres off-axis on the curved sensors, half-spaces past the pad's mid-plane, all at
+# depths that are not round numbers. Shared by tests/test_contact_drake.py and
+# benchmarks/drake_agreement.py.
+TILT = (0.26113296, 0.17353392, -0.02284617)  # 15 degrees about x, then 10 about y
+OFF_AXIS_CASES = {
+    "pad5x5, 2 mm cylinder tilted 15/10 degrees, 0.43 mm": ("pad5x5", "cylinder:d=2mm,length=6mm", TILT, (0.37e-3, -0.21e-3), 0.43e-3),
+    "pad5x5, box pressed edge first, 0.31 mm": ("pad5x5", "box:x=4mm,y=4mm,z=2mm", (np.pi / 4, 0.0, 0.1), (-0.52e-3, 1.13e-3), 0.31e-3),
+    "sphere8, 3 mm sphere off-axis, 0.37 mm": ("sphere8", "sphere:r=3mm", (0.0, 0.0, 0.0), (2.3e-3, -1.7e-3), 0.37e-3),
+    "ellipsoid8, 3 mm sphere off-axis, 0.52 mm": ("ellipsoid8", "sphere:r=3mm", (0.0, 0.0, 0.0), (-3.1e-3, 1.2e-3), 0.52e-3),
+    "pad5x5, half-space past the mid-plane, 2.47 mm": ("pad5x5", "plane", (0.0, 0.0, 0.0), (0.0, 0.0), 2.47e-3),
+    "pad5x5, half-space past the mid-plane, 3.13 mm": ("pad5x5", "plane", (0.0, 0.0, 0.0), (0.0, 0.0), 3.13e-3),
+}
+
+
+def off_axis_case(label, scratch, modulus):
+    """One of OFF_AXIS_CASES set up for both codes: (field, probe, X_SR, Drake's
+    surfaces). The probe's lowest point goes `depth` below the skin above (x, y)."""
+    from pydrake.geometry import HalfSpace as DrakeHalfSpace
+
+    from hydrotact.contact import HalfSpace, calc_skin_height, make_pose, parse_probe
+    from hydrotact.field import calc_distance_field, make_pressure_field
+    from hydrotact.mesh import make_seed_mesh, read_mesh, write_mesh
+
+    sensor, spec, rotation_vector, (x, y), depth = OFF_AXIS_CASES[label]
+    path = write_mesh(make_seed_mesh(sensor), scratch / f"{sensor}.vtk")
+    mesh, _ = read_mesh(path)
+    field = make_pressure_field(mesh, calc_distance_field(mesh), modulus)
+    probe = parse_probe(spec)
+    rotation = np.asarray(make_pose(np.zeros(3), rotation_vector).rotation)
+    lowest = 0.0 if isinstance(probe, HalfSpace) else float(np.min(np.asarray(probe.vertices_R) @ rotation.T, axis=0)[2])
+    X = np.eye(4)
+    X[:3, :3] = rotation
+    X[:3, 3] = [x, y, calc_skin_height(mesh, x, y) - depth - lowest]
+    if isinstance(probe, HalfSpace):
+        drake = drake_contact_surfaces(path, modulus, DrakeHalfSpace(), X_WO=pressing_plane_pose(X[2, 3]))
+    else:
+        probe.write_obj(scratch / "probe.obj")
+        drake = drake_contact_surfaces(path, modulus, str(scratch / "probe.obj"), X_WO=X)
+    return field, probe, make_pose(X[:3, 3], rotation_vector), drake

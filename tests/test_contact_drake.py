@@ -7,7 +7,7 @@ same poses. Total area, force on the sensor and centroid must agree to 1e-9 (the
 
 import numpy as np
 import pytest
-from drake_reference import drake_contact_surfaces, integrate_drake_surface, pressing_plane_pose
+from drake_reference import OFF_AXIS_CASES, drake_contact_surfaces, integrate_drake_surface, off_axis_case, pressing_plane_pose
 
 from hydrotact.contact import HalfSpace, compute_contact_surface, make_cylinder_probe, make_pose
 from hydrotact.field import calc_distance_field, make_pressure_field
@@ -71,3 +71,11 @@ def test_two_soft_balls(tmp_path):
     ours, _ = compute_contact_surface(field_a, field_b, X_SB)
     area, force = _compare(ours, drake_contact_surfaces(path_a, MODULUS, str(path_b), X_WO=np.asarray(X_SB.as_matrix()), other_modulus=MODULUS))
     assert force[2] < 0 and int(ours.num_polygons) > 50
+
+
+@pytest.mark.parametrize("label", list(OFF_AXIS_CASES))
+def test_off_axis_tilted_and_past_the_mid_plane(tmp_path, label):
+    field, probe, X_SR, drake = off_axis_case(label, tmp_path, MODULUS)
+    ours, _ = compute_contact_surface(field, probe, X_SR)
+    area, force = _compare(ours, drake)
+    assert area > 0 and np.linalg.norm(force) > 0

@@ -50,6 +50,35 @@ def _marching_tets_table() -> np.ndarray:
 MARCHING_TETS = _marching_tets_table()
 
 
+def _marching_tets_flips() -> np.ndarray:
+    """For each sign pattern, whether the cycle of MARCHING_TETS runs clockwise about
+    -grad h (the push direction) in a positively oriented tet (16,).
+
+    The winding is a property of the case, not of the geometry: on a positively
+    oriented tet the same case always winds the same way. Taking it from the table
+    rather than from the polygon's own normal keeps it right where the polygon is
+    degenerate (the plane exactly on a vertex, an edge or a face: a zero-area polygon
+    whose derivative still counts), where that normal is zero. Found once on the unit
+    tet, with heights +1 above and -1 below (any signs are some plane's).
+    """
+    corners = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    flips = np.zeros(16, dtype=bool)
+    for case in range(1, 15):
+        heights = np.array([1.0 if case >> v & 1 else -1.0 for v in range(4)])
+        gradient = heights[1:] - heights[0]  # h(x) = h_0 + gradient . x on the unit tet
+        points = []
+        for edge in MARCHING_TETS[case][MARCHING_TETS[case] >= 0]:
+            a, b = TET_EDGES[edge]
+            t = heights[a] / (heights[a] - heights[b])
+            points.append(corners[a] + t * (corners[b] - corners[a]))
+        normal = np.cross(points[1] - points[0], points[2] - points[0])
+        flips[case] = np.dot(normal, -gradient) < 0.0
+    return flips
+
+
+MARCHING_FLIPS = _marching_tets_flips()
+
+
 def plane_square(point, normal, centre, half_size):
     """A square in the plane (point, normal) centred on `centre`'s projection, wound
     counter-clockwise about `normal`, in a (capacity, 3) polygon buffer."""
@@ -72,10 +101,11 @@ def slice_tet(tet_vertices, point, normal):
     return clip_polygon_by_tet_faces(square, jnp.asarray(4), tet_vertices)
 
 
-def slice_tets_marching_columns(tet_vertices, tet_values, heights, push):
-    """The sections of P tets where `heights` (signed, per vertex) vanish, in column
-    layout (see `_polygon.py`): tet_vertices (3, 4, P), tet_values and heights (4,
-    P), push (3,). Polygons wind counter-clockwise about `push`; `tet_values` are
+def slice_tets_marching_columns(tet_vertices, tet_values, heights):
+    """The sections of P positively oriented tets where `heights` (signed, per vertex,
+    of a linear function) vanish, in column layout (see `_polygon.py`): tet_vertices
+    (3, 4, P), tet_values and heights (4, P). Polygons wind counter-clockwise about
+    the direction in which the heights fall (MARCHING_FLIPS); `tet_values` are
     interpolated linearly along the crossed edges. Every crossing is computed on all
     six edges, then each polygon slot selects its edge from the case table: no
     per-vertex gathers.
@@ -96,11 +126,10 @@ def slice_tets_marching_columns(tet_vertices, tet_values, heights, push):
         slot_points.append(sum(jnp.where(edges[k][None] == e, points[e], 0.0) for e in range(6)))
         slot_values.append(sum(jnp.where(edges[k] == e, values[e], 0.0) for e in range(6)))
     count = jnp.sum(edges >= 0, axis=0)
-    # Wind counter-clockwise about push: reverse the cycle when it runs the other way
-    # (slots 1 and 3 swap for a quadrilateral, 1 and 2 for a triangle).
+    # Wind counter-clockwise about push: reverse the cycle where the case runs the
+    # other way (slots 1 and 3 swap for a quadrilateral, 1 and 2 for a triangle).
     p0, p1, p2, p3 = slot_points
-    normal = jnp.cross(p1 - p0, p2 - p0, axis=0)
-    flip = jnp.sum(normal * push[:, None], axis=0) < 0.0
+    flip = jnp.asarray(MARCHING_FLIPS)[case]
     quad = count == 4
     v0, v1, v2, v3 = slot_values
     order = (
@@ -161,7 +190,7 @@ def calc_half_space_surface(
     )
     rows = tet_rows[tet_index].T  # (19, size)
     vertices, pressures, counts = slice_tets_marching_columns(
-        jnp.transpose(rows[:12].reshape(4, 3, -1), (1, 0, 2)), rows[12:16], tet_heights.T, push
+        jnp.transpose(rows[:12].reshape(4, 3, -1), (1, 0, 2)), rows[12:16], tet_heights.T
     )
     area, integral, first_moment, pressure_moment = calc_polygon_integrals_columns(vertices, counts, pressures, push[:, None])
     vertices, pressures = to_polygon_rows(vertices, pressures, POLYGON_CAPACITY)

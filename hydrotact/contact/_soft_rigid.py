@@ -125,29 +125,37 @@ def _planes_may_meet(tet, triangle):
 
 
 def _resolve_face_ties(tet, triangle):
-    """The tie rule for a rigid triangle lying in the plane of a tet face (rows as in
+    """The tie rule for a rigid triangle whose plane touches a tet (rows as in
     :func:`_planes_may_meet`, one pair per column).
 
     A triangle in the plane of a face shared by two tets lies, to round-off, inside
     both, and clipping would give each the whole piece: the pressure counted twice (a
-    flat probe face on a vertex layer of a structured mesh). The rule keeps it in
-    exactly one: the tet on the side the triangle's normal points to (out of the rigid
-    body, into the soft body it pushes), which is never clipped by that face; the tet
-    on the other side drops it. The pressure is continuous across the shared face, so
-    the surface is the limit of the poses just off the tie from either side.
+    flat probe face on a vertex layer of a structured mesh). The rule keeps the piece
+    in the tets on the side the triangle's normal points to (out of the rigid body,
+    into the soft body it pushes) and drops every pair whose tet only touches the
+    plane from the rigid body's side (at a face, an edge or a vertex). A kept tet
+    whose face lies in the plane is not clipped by that face. The pressure is
+    continuous across the face, so the surface is the limit of the poses just off
+    the tie from either side; and every polygon left is the one the triangle's motion
+    along its normal (deeper) opens, so derivatives on the tie are the one-sided ones
+    of going deeper (the zero-area polygons that the touching tets on the rigid side
+    would give open only the other way).
 
-    "In the plane" means all three corners within SEPARATION_TOLERANCE times the
-    coordinates' magnitude of it (a picometre at centimetre scale): far above the
-    round-off of the pose transform and the face plane, far below any real offset.
-    Off the tie the clipping decides as usual, and a piece of one tet that the
-    tolerance hands to its neighbour has a thickness below the tolerance.
+    "Touching" means within SEPARATION_TOLERANCE times the coordinates' magnitude (a
+    picometre at centimetre scale): far above the round-off of the pose transform and
+    the face planes, far below any real offset. Off the tie the clipping decides as
+    usual; what the tolerance moves has a thickness below it.
 
     **Returns:** (the face planes to clip by (4, 4, P), with the kept tie faces moved
     out of the way; which pairs the rule drops (P,)).
     """
     planes = tet[18:34].reshape(4, 4, -1)
     scale = SEPARATION_TOLERANCE * jnp.maximum(tet[38], triangle[34])
-    drop = jnp.zeros(planes.shape[-1], dtype=bool)
+    highest = None
+    for k in range(4):
+        height = tet[3 * k] * triangle[15] + tet[3 * k + 1] * triangle[16] + tet[3 * k + 2] * triangle[17] - triangle[18]
+        highest = height if highest is None else jnp.maximum(highest, height)
+    drop = jax.lax.stop_gradient(highest <= scale)
     offsets = []
     for f in range(4):
         normal, offset, length = planes[f, :3], planes[f, 3], tet[34 + f]
@@ -156,10 +164,6 @@ def _resolve_face_ties(tet, triangle):
             d = jnp.abs(jnp.sum(normal * triangle[3 * v : 3 * v + 3], axis=0) - offset)
             off_plane = d if off_plane is None else jnp.maximum(off_plane, d)
         tie = jax.lax.stop_gradient(off_plane <= scale * length)
-        # The tet lies behind its outward face normal: on the triangle normal's side
-        # when the two point against each other.
-        behind = jnp.sum(normal * triangle[15:18], axis=0) < 0.0
-        drop = drop | (tie & ~behind)
         # A kept tie face clips nothing: its plane moves out by the tet's own size.
         margin = jax.lax.stop_gradient(tet[38] * length)
         offsets.append(jnp.where(tie, offset + margin, offset))
@@ -178,6 +182,10 @@ def calc_soft_rigid_surface(
     jittable, vmappable over X_SR, differentiable in X_SR, E and the field).
 
     Normals point out of the rigid body, the direction of the force on the soft body.
+    Convention (Drake's soft-volume / rigid-mesh query): a polygon whose normal is
+    more than 5 pi / 8 from the tet's pressure gradient is dropped
+    (:func:`is_normal_along_gradient`); a triangle lying in the plane of a tet face
+    counts in one tet only (:func:`_resolve_face_ties`), where Drake counts it in both.
     `brute_force` clips every tet against every triangle (the reference for the broad
     phase; its buffers hold num_tets x num_faces polygons and never overflow).
     `clusters` (from :func:`make_tet_clusters`) makes the tet search hierarchical.

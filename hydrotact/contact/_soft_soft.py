@@ -41,7 +41,11 @@ def calc_soft_soft_surface(
 ) -> ContactSurface:
     """The contact surface of soft body A (frame S) and soft body B at pose X_SB
     (pure, jittable, vmappable over X_SB, differentiable). `brute_force` tries every
-    pair of tets (the reference for the broad phase)."""
+    pair of tets (the reference for the broad phase).
+
+    Convention (Drake's soft-volume / soft-volume query): a polygon counts only where
+    its push direction lies within 5 pi / 8 of both tets' pressure gradients
+    (:func:`is_normal_along_gradient`, in opposite senses for the two bodies)."""
     points_A = field_A.vertices[field_A.tets]
     points_B = X_SB.apply(field_B.vertices.astype(field_A.vertices.dtype))[field_B.tets]
     offsets_A, gradients_A = calc_tet_pressure_planes(field_A)

@@ -98,7 +98,10 @@ def assemble_surface(polygons, normals_S, pair_valid, keep, tet_index, other_ind
     `polygons` is (vertices, pressures, counts, areas, pressure integrals, first
     moments, pressure moments), as `calc_polygon_integrals` and the clippers give them.
     A slot is valid when its pair is real, it passes `keep` (the gradient filter) and
-    its polygon has positive area. Indices of unused slots read -1.
+    its polygon has at least three vertices and no negative area. Zero-area polygons
+    count: at a tie (a plane through a vertex, an edge or a face of a tet) they are
+    the sections that open up as the pose moves, and their derivatives belong to the
+    surface's. Indices of unused slots read -1.
     """
     vertices, pressures, counts, areas, integrals, first_moments, pressure_moments = polygons
     return ContactSurface(
@@ -106,7 +109,7 @@ def assemble_surface(polygons, normals_S, pair_valid, keep, tet_index, other_ind
         pressures=pressures,
         counts=counts,
         normals_S=normals_S,
-        valid=pair_valid & keep & (counts >= 3) & (areas > 0.0),
+        valid=pair_valid & keep & (counts >= 3) & (areas >= 0.0),
         areas=areas,
         pressure_integrals=integrals,
         first_moments_S=first_moments,
