@@ -140,13 +140,13 @@ def clip_polygon_columns(vertices, count, normal, offset):
     return out, jnp.minimum(emitted_before, n + 1)
 
 
-def clip_polygon_by_tet_faces_columns(vertices, count, face_planes):
-    """Clip P polygons by the four faces of their tets: `face_planes` (4, 4, P) holds
-    each face's outward normal (rows 0-2) and offset (row 3), as
+def clip_polygon_by_tet_faces_columns(vertices, count, face_normals, face_offsets):
+    """Clip P polygons by the four faces of their tets: `face_normals` (4, 3, P) and
+    `face_offsets` (4, P), each face's outward normal and offset, as
     :func:`calc_tet_face_planes` gives them. vertices (3, n, P) -> (3, n + 4, P)."""
     vertices = [vertices[:, k] for k in range(vertices.shape[1])]
     for face in range(4):
-        vertices, count = clip_polygon_columns(vertices, count, face_planes[face, :3], face_planes[face, 3])
+        vertices, count = clip_polygon_columns(vertices, count, face_normals[face], face_offsets[face])
     return jnp.stack(vertices, axis=1), count
 
 

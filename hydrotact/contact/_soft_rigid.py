@@ -146,28 +146,25 @@ def _resolve_face_ties(tet, triangle):
     the face planes, far below any real offset. Off the tie the clipping decides as
     usual; what the tolerance moves has a thickness below it.
 
-    **Returns:** (the face planes to clip by (4, 4, P), with the kept tie faces moved
-    out of the way; which pairs the rule drops (P,)).
+    **Returns:** (the tet's outward face normals (4, 3, P) and the offsets to clip by
+    (4, P), with the kept tie faces moved out of the way; which pairs the rule drops
+    (P,)).
     """
     planes = tet[18:34].reshape(4, 4, -1)
     scale = SEPARATION_TOLERANCE * jnp.maximum(tet[38], triangle[34])
-    highest = None
-    for k in range(4):
-        height = tet[3 * k] * triangle[15] + tet[3 * k + 1] * triangle[16] + tet[3 * k + 2] * triangle[17] - triangle[18]
-        highest = height if highest is None else jnp.maximum(highest, height)
+    heights = [tet[3 * k] * triangle[15] + tet[3 * k + 1] * triangle[16] + tet[3 * k + 2] * triangle[17] - triangle[18] for k in range(4)]
+    touching = [jax.lax.stop_gradient(jnp.abs(h) <= scale) for h in heights]
+    highest = jnp.maximum(jnp.maximum(heights[0], heights[1]), jnp.maximum(heights[2], heights[3]))
     drop = jax.lax.stop_gradient(highest <= scale)
+    # Face f (opposite vertex f) lies in the plane when its three vertices do; a kept
+    # tie face clips nothing: its plane moves out by the tet's own size.
     offsets = []
     for f in range(4):
-        normal, offset, length = planes[f, :3], planes[f, 3], tet[34 + f]
-        off_plane = None
-        for v in range(3):
-            d = jnp.abs(jnp.sum(normal * triangle[3 * v : 3 * v + 3], axis=0) - offset)
-            off_plane = d if off_plane is None else jnp.maximum(off_plane, d)
-        tie = jax.lax.stop_gradient(off_plane <= scale * length)
-        # A kept tie face clips nothing: its plane moves out by the tet's own size.
-        margin = jax.lax.stop_gradient(tet[38] * length)
-        offsets.append(jnp.where(tie, offset + margin, offset))
-    return planes.at[:, 3].set(jnp.stack(offsets)), drop
+        others = [touching[k] for k in range(4) if k != f]
+        tie = others[0] & others[1] & others[2]
+        margin = jax.lax.stop_gradient(tet[38] * tet[34 + f])
+        offsets.append(jnp.where(tie, planes[f, 3] + margin, planes[f, 3]))
+    return planes[:, :3], jnp.stack(offsets), drop
 
 
 def calc_soft_rigid_surface(
@@ -276,8 +273,8 @@ def calc_soft_rigid_surface(
     num_polygons_slots = tet_index.shape[0]
     normals = pair_triangles[15:18]  # (3, P)
     corners = jnp.transpose(pair_triangles[:9].reshape(3, 3, num_polygons_slots), (1, 0, 2))  # (3 coordinates, 3 corners, P)
-    face_planes, tie_drop = _resolve_face_ties(pair_tets, pair_triangles)
-    vertices, counts = clip_polygon_by_tet_faces_columns(corners, jnp.full(tri_index.shape, 3), face_planes)
+    face_normals, face_offsets, tie_drop = _resolve_face_ties(pair_tets, pair_triangles)
+    vertices, counts = clip_polygon_by_tet_faces_columns(corners, jnp.full(tri_index.shape, 3), face_normals, face_offsets)
     pair_gradients = pair_tets[40:43]
     pressures = pair_tets[39][None] + jnp.sum(vertices * pair_gradients[:, None], axis=0)
     pressures = jnp.where(jnp.arange(vertices.shape[1])[:, None] < counts[None], pressures, 0.0)
