@@ -144,6 +144,7 @@ def off_axis_case(label, scratch, modulus):
     if isinstance(probe, HalfSpace):
         drake = drake_contact_surfaces(path, modulus, DrakeHalfSpace(), X_WO=pressing_plane_pose(X[2, 3]))
     else:
-        probe.write_obj(scratch / "probe.obj")
-        drake = drake_contact_surfaces(path, modulus, str(scratch / "probe.obj"), X_WO=X)
+        probe_path = scratch / f"off-axis-probe-{list(OFF_AXIS_CASES).index(label)}.obj"  # its own file: callers keep theirs
+        probe.write_obj(probe_path)
+        drake = drake_contact_surfaces(path, modulus, str(probe_path), X_WO=X)
     return field, probe, make_pose(X[:3, 3], rotation_vector), drake
