@@ -109,7 +109,6 @@ class AbstractCapacity(eqx.Module):
             grown = type(self)(**{name: 2 * size for name, size in zip(names, self.sizes)})
         return grown
 
-
     def fitted_to(self, needed) -> Self:
         """The capacity to keep after a result that did not overflow (host).
 
