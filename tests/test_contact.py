@@ -468,9 +468,8 @@ def test_ties_match_brute_force():
     culled = jax.vmap(lambda X: calc_half_space_surface(field, X, Capacity(4096, 0, 0, 4096), clusters=clusters))(poses)
     probes = [
         (make_box_probe((2e-3, 2e-3, 2e-3)), np.zeros(3)),
-        (make_cylinder_probe(2e-3, length=3e-3, num_sides=12), np.array([0.26, 0.17, 0.0])),
         (make_box_probe((3e-3, 3e-3, 2e-3)), np.array([np.pi / 4, 0.0, 0.0])),
-    ]
+    ]  # tilted cylinders against brute force: test_broad_phase_matches_brute_force_soft_rigid
     pairs = [(culled, brute)]
     for probe, rotation in probes:
         poses = _poses_at_depths(probe, rotation, depths[:2])
