@@ -92,6 +92,12 @@ def _boxes_meet(tet, triangle):
     return meet
 
 
+def _heights_above_triangle_plane(tet, triangle):
+    """The four tet vertices' signed heights along the triangle's unit normal, above
+    its plane (rows as in :func:`_boxes_meet`): a list of 4 rows."""
+    return [tet[3 * k] * triangle[15] + tet[3 * k + 1] * triangle[16] + tet[3 * k + 2] * triangle[17] - triangle[18] for k in range(4)]
+
+
 def _planes_may_meet(tet, triangle):
     """Whether tets and triangles whose boxes overlap may meet: the tet straddles the
     triangle's plane, and no tet face plane and no triangle edge plane separates them
@@ -102,7 +108,7 @@ def _planes_may_meet(tet, triangle):
     apart by more than SEPARATION_TOLERANCE times the coordinates' magnitude (far
     above round-off).
     """
-    heights = [tet[3 * k] * triangle[15] + tet[3 * k + 1] * triangle[16] + tet[3 * k + 2] * triangle[17] - triangle[18] for k in range(4)]
+    heights = _heights_above_triangle_plane(tet, triangle)
     lowest = jnp.minimum(jnp.minimum(heights[0], heights[1]), jnp.minimum(heights[2], heights[3]))
     highest = jnp.maximum(jnp.maximum(heights[0], heights[1]), jnp.maximum(heights[2], heights[3]))
     meet = (lowest <= 0.0) & (highest >= 0.0)
@@ -152,7 +158,7 @@ def _resolve_face_ties(tet, triangle):
     """
     planes = tet[18:34].reshape(4, 4, -1)
     scale = SEPARATION_TOLERANCE * jnp.maximum(tet[38], triangle[34])
-    heights = [tet[3 * k] * triangle[15] + tet[3 * k + 1] * triangle[16] + tet[3 * k + 2] * triangle[17] - triangle[18] for k in range(4)]
+    heights = _heights_above_triangle_plane(tet, triangle)
     touching = [jax.lax.stop_gradient(jnp.abs(h) <= scale) for h in heights]
     highest = jnp.maximum(jnp.maximum(heights[0], heights[1]), jnp.maximum(heights[2], heights[3]))
     drop = jax.lax.stop_gradient(highest <= scale)
