@@ -71,7 +71,7 @@ def calc_polygon_integrals(vertices, count, pressures, normal):
     """
     capacity = vertices.shape[0]
     i = jnp.arange(1, capacity - 1)
-    used = (i + 1 < count)
+    used = i + 1 < count
     v0 = vertices[:1]  # (1, 3): broadcasts against the fan's (k, 3) explicitly
     vi, vj = vertices[i], vertices[i + 1]
     p0, pi, pj = pressures[0], pressures[i], pressures[i + 1]
@@ -85,7 +85,6 @@ def calc_polygon_integrals(vertices, count, pressures, normal):
     weighted = p0 * v0 + pi[:, None] * vi + pj[:, None] * vj + sum_p[:, None] * sum_x
     pressure_moment = jnp.sum(areas[:, None] * weighted, axis=0) / 12.0
     return area, force, first_moment, pressure_moment
-
 
 
 # Column layout: many polygons at once, the polygon index last, so that every step is
@@ -127,15 +126,18 @@ def clip_polygon_columns(vertices, count, normal, offset):
         keep.append(active & inside)
         starts.append(emitted_before)
         emitted_before = emitted_before + keep[i].astype(count.dtype) + crosses[i].astype(count.dtype)
+    # The slot each vertex's own point and its crossing go to (-1: none).
+    own_slot = [jnp.where(keep[i], starts[i], -1) for i in range(n)]
+    crossing_slot = [jnp.where(crosses[i], starts[i] + keep[i].astype(count.dtype), -1) for i in range(n)]
     out = []
     for s in range(n + 1):
         slot = jnp.zeros_like(vertices[0])
         for i in range(n):
             # Vertex i emits at most two points, at slots starts[i] <= 2 i and the next.
             if 2 * i >= s:
-                slot = jnp.where((keep[i] & (starts[i] == s))[None], vertices[i], slot)
+                slot = jnp.where((own_slot[i] == s)[None], vertices[i], slot)
             if 2 * i + 1 >= s:
-                slot = jnp.where((crosses[i] & (starts[i] + keep[i].astype(count.dtype) == s))[None], crossing[i], slot)
+                slot = jnp.where((crossing_slot[i] == s)[None], crossing[i], slot)
         out.append(slot)
     return out, jnp.minimum(emitted_before, n + 1)
 

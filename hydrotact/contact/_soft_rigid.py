@@ -31,15 +31,16 @@ def calc_tet_pressure_planes(field: PressureField):
     return offsets, gradients
 
 
-def is_normal_along_gradient(normal, gradient):
+def is_normal_along_gradient(normal, gradient, axis: int = -1):
     """Whether the direction `normal` in which a polygon pushes a soft body lies within
-    5 pi / 8 of that body's pressure gradient (which points into the body).
+    5 pi / 8 of that body's pressure gradient (which points into the body); the
+    vectors' components along `axis`.
 
     This is Drake's filter: a piece of rigid surface that faces back out of the soft
     body (say, the far side of a probe pushed right through a thin pad) is dropped.
     """
-    gradient_norm = jnp.sqrt(jnp.maximum(jnp.sum(gradient * gradient), 1e-300))
-    return jnp.dot(normal, gradient) >= jnp.cos(5.0 * jnp.pi / 8.0) * gradient_norm
+    gradient_norm = jnp.sqrt(jnp.maximum(jnp.sum(gradient * gradient, axis=axis), 1e-300))
+    return jnp.sum(normal * gradient, axis=axis) >= jnp.cos(5.0 * jnp.pi / 8.0) * gradient_norm
 
 
 # Separation tests cull a pair only when it is separated by more than this fraction of
@@ -52,24 +53,57 @@ SEPARATION_TOLERANCE = 1e-10
 CLUSTER_SEARCH = 4
 
 
+# Per-tet rows (43), in the order the stages stop reading them, so that each stage's
+# gather takes one leading block: the clipping reads TET_CLIP_ROWS, the plane tests
+# TET_TEST_ROWS, the box test all.
+TET_VERTICES = 0  # 12, vertex-major
+TET_PLANES = 12  # 16, face-major: outward normal (unnormalised), offset
+TET_PLANE_LENGTHS = 28  # 4, the face normals' lengths
+TET_REACH = 32  # 1, the largest coordinate
+TET_PRESSURE = 33  # 4: the pressure plane's offset, then its gradient
+TET_TEST_ROWS = 33
+TET_CLIP_ROWS = 37
+TET_LO = 37  # 3
+TET_HI = 40  # 3
+
+# Per-triangle rows (35), likewise.
+TRI_VERTICES = 0  # 9, vertex-major
+TRI_NORMAL = 9  # 3, unit
+TRI_OFFSET = 12  # 1, normal . x on the plane
+TRI_REACH = 13  # 1, the largest coordinate
+TRI_CLIP_ROWS = 14
+TRI_EDGES = 14  # 12: for each edge the outward in-plane normal (end - start) x normal, then its offset
+TRI_EDGE_LENGTHS = 26  # 3, the edge normals' lengths
+TRI_TEST_ROWS = 29
+TRI_LO = 29  # 3
+TRI_HI = 32  # 3
+
+
+class _Columns:
+    """Row k of a table held as columns: `_Columns(a)[k]` is `a[:, k]`."""
+
+    def __init__(self, table):
+        self.table = table
+
+    def __getitem__(self, k):
+        return self.table[:, k]
+
+
 def _tet_columns(tet_points, face_planes, offsets, gradients):
-    """Per-tet data the pair tests and the clipping read, one row per quantity
-    (43, num_tets): vertices (12, vertex-major), box lo (3), hi (3), face planes (16,
-    face-major: outward normal, offset), the face normals' lengths (4), the largest
-    coordinate (1), the pressure plane (offset 1, gradient 3)."""
+    """Per-tet data the pair tests and the clipping read, one row per quantity (43,
+    num_tets), laid out as the TET_* indices say."""
     lo, hi = calc_boxes(tet_points)
     lengths = jnp.sqrt(jnp.sum(face_planes[..., :3] ** 2, axis=-1))
     reach = jnp.max(jnp.maximum(jnp.abs(lo), jnp.abs(hi)), axis=-1, keepdims=True)
-    rows = [tet_points.reshape(-1, 12), lo, hi, face_planes.reshape(-1, 16), lengths, reach, offsets[:, None], gradients]
+    rows = [tet_points.reshape(-1, 12), face_planes.reshape(-1, 16), lengths, reach, offsets[:, None], gradients, lo, hi]
     return jnp.concatenate(rows, axis=1).T
 
 
-def _triangle_columns(triangles, normals):
-    """Per-triangle data the pair tests read (35, num_triangles): vertices (9), box lo
-    (3), hi (3), unit normal (3), plane offset (1), edge planes (12: for each edge the
-    outward in-plane normal (end - start) x normal, then its offset), the edge
-    normals' lengths (3), the largest coordinate (1)."""
-    lo, hi = calc_boxes(triangles)
+def _triangle_rows(triangles, lo, hi):
+    """Per-triangle data the pair tests and the clipping read (num_triangles, 35), laid
+    out as the TRI_* indices say, from the triangles (T, 3, 3) and their boxes."""
+    normals = jnp.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    normals = normals / jnp.sqrt(jnp.maximum(jnp.sum(normals**2, axis=-1, keepdims=True), 1e-300))
     offset = jnp.sum(normals * triangles[:, 0], axis=-1, keepdims=True)
     edges, lengths = [], []
     for e in range(3):
@@ -78,7 +112,7 @@ def _triangle_columns(triangles, normals):
         edges += [outward, jnp.sum(outward * start, axis=-1, keepdims=True)]
         lengths.append(jnp.sqrt(jnp.sum(outward * outward, axis=-1, keepdims=True)))
     reach = jnp.max(jnp.maximum(jnp.abs(lo), jnp.abs(hi)), axis=-1, keepdims=True)
-    return jnp.concatenate([triangles.reshape(-1, 9), lo, hi, normals, offset, *edges, *lengths, reach], axis=1).T
+    return jnp.concatenate([triangles.reshape(-1, 9), normals, offset, reach, *edges, *lengths, lo, hi], axis=1)
 
 
 def _boxes_meet(tet, triangle):
@@ -87,7 +121,7 @@ def _boxes_meet(tet, triangle):
     other's: (S, 1) against (1, T) for every tet against every triangle)."""
     meet = None
     for axis in range(3):
-        overlap = (tet[12 + axis] <= triangle[12 + axis]) & (triangle[9 + axis] <= tet[15 + axis])
+        overlap = (tet[TET_LO + axis] <= triangle[TRI_HI + axis]) & (triangle[TRI_LO + axis] <= tet[TET_HI + axis])
         meet = overlap if meet is None else meet & overlap
     return meet
 
@@ -95,7 +129,13 @@ def _boxes_meet(tet, triangle):
 def _heights_above_triangle_plane(tet, triangle):
     """The four tet vertices' signed heights along the triangle's unit normal, above
     its plane (rows as in :func:`_boxes_meet`): a list of 4 rows."""
-    return [tet[3 * k] * triangle[15] + tet[3 * k + 1] * triangle[16] + tet[3 * k + 2] * triangle[17] - triangle[18] for k in range(4)]
+    n = [triangle[TRI_NORMAL + axis] for axis in range(3)]
+    return [tet[3 * k] * n[0] + tet[3 * k + 1] * n[1] + tet[3 * k + 2] * n[2] - triangle[TRI_OFFSET] for k in range(4)]
+
+
+def _pair_scale(tet, triangle):
+    """SEPARATION_TOLERANCE times the pair's coordinate magnitude."""
+    return SEPARATION_TOLERANCE * jnp.maximum(tet[TET_REACH], triangle[TRI_REACH])
 
 
 def _planes_may_meet(tet, triangle):
@@ -112,21 +152,21 @@ def _planes_may_meet(tet, triangle):
     lowest = jnp.minimum(jnp.minimum(heights[0], heights[1]), jnp.minimum(heights[2], heights[3]))
     highest = jnp.maximum(jnp.maximum(heights[0], heights[1]), jnp.maximum(heights[2], heights[3]))
     meet = (lowest <= 0.0) & (highest >= 0.0)
-    scale = SEPARATION_TOLERANCE * jnp.maximum(tet[38], triangle[34])
+    scale = _pair_scale(tet, triangle)
     for f in range(4):
-        row = 18 + 4 * f
+        row = TET_PLANES + 4 * f
         nearest = None
         for v in range(3):
             d = tet[row] * triangle[3 * v] + tet[row + 1] * triangle[3 * v + 1] + tet[row + 2] * triangle[3 * v + 2]
             nearest = d if nearest is None else jnp.minimum(nearest, d)
-        meet = meet & (nearest - tet[row + 3] <= scale * tet[34 + f])
+        meet = meet & (nearest - tet[row + 3] <= scale * tet[TET_PLANE_LENGTHS + f])
     for e in range(3):
-        row = 19 + 4 * e
+        row = TRI_EDGES + 4 * e
         nearest = None
         for k in range(4):
             d = tet[3 * k] * triangle[row] + tet[3 * k + 1] * triangle[row + 1] + tet[3 * k + 2] * triangle[row + 2]
             nearest = d if nearest is None else jnp.minimum(nearest, d)
-        meet = meet & (nearest - triangle[row + 3] <= scale * triangle[31 + e])
+        meet = meet & (nearest - triangle[row + 3] <= scale * triangle[TRI_EDGE_LENGTHS + e])
     return meet
 
 
@@ -156,8 +196,8 @@ def _resolve_face_ties(tet, triangle):
     (4, P), with the kept tie faces moved out of the way; which pairs the rule drops
     (P,)).
     """
-    planes = tet[18:34].reshape(4, 4, -1)
-    scale = SEPARATION_TOLERANCE * jnp.maximum(tet[38], triangle[34])
+    planes = tet[TET_PLANES : TET_PLANES + 16].reshape(4, 4, -1)
+    scale = _pair_scale(tet, triangle)
     heights = _heights_above_triangle_plane(tet, triangle)
     touching = [jax.lax.stop_gradient(jnp.abs(h) <= scale) for h in heights]
     highest = jnp.maximum(jnp.maximum(heights[0], heights[1]), jnp.maximum(heights[2], heights[3]))
@@ -168,7 +208,7 @@ def _resolve_face_ties(tet, triangle):
     for f in range(4):
         others = [touching[k] for k in range(4) if k != f]
         tie = others[0] & others[1] & others[2]
-        margin = jax.lax.stop_gradient(tet[38] * tet[34 + f])
+        margin = jax.lax.stop_gradient(tet[TET_REACH] * tet[TET_PLANE_LENGTHS + f])
         offsets.append(jnp.where(tie, planes[f, 3] + margin, planes[f, 3]))
     return planes[:, :3], jnp.stack(offsets), drop
 
@@ -205,14 +245,11 @@ def calc_soft_rigid_surface(
     dtype = field.vertices.dtype
     vertices_S = X_SR.apply(jnp.asarray(rigid.vertices_R, dtype))
     triangles = vertices_S[rigid.faces]
-    triangle_normals = jnp.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
-    norms = jnp.sqrt(jnp.maximum(jnp.sum(triangle_normals**2, axis=-1, keepdims=True), 1e-300))
-    triangle_normals = triangle_normals / norms
+    tri_lo, tri_hi = calc_boxes(triangles)
     tet_points = field.vertices[field.tets]
     face_planes = calc_tet_face_planes(tet_points)  # (num_tets, 4, 4)
     offsets, gradients = calc_tet_pressure_planes(field)
     tet_rows = _tet_columns(tet_points, face_planes, offsets, gradients).T  # (num_tets, 43)
-    triangle_columns = _triangle_columns(triangles, triangle_normals)  # (35, num_triangles)
 
     if brute_force:
         num_tets, num_tris = tet_points.shape[0], triangles.shape[0]
@@ -221,14 +258,13 @@ def calc_soft_rigid_surface(
         pair_valid = jnp.ones(tet_index.shape, dtype=bool)
         needed = jnp.array([num_tets, num_tris, tet_index.shape[0], tet_index.shape[0]])
         overflow = jnp.asarray(False)
-        pair_tets, pair_triangles = tet_rows[tet_index].T, triangle_columns[:, tri_index]
+        pair_tets, pair_triangles = tet_rows[tet_index].T, _triangle_rows(triangles, tri_lo, tri_hi)[tri_index].T
     else:
         if clusters is None:  # every tet its own cluster
             clusters = TetClusters(members=jnp.arange(tet_points.shape[0], dtype=jnp.int32)[:, None])
         members = jnp.asarray(clusters.members)
         cluster_size = clusters.cluster_size
         cluster_lo, cluster_hi = calc_cluster_boxes(clusters, tet_points)
-        tri_lo, tri_hi = triangle_columns[9:12].T, triangle_columns[12:15].T
         # The region: the soft body's box, cut to the box of the triangles that meet it
         # (a triangle that meets a tet meets the soft body's box, at a point of both).
         soft_lo, soft_hi = jnp.min(cluster_lo, axis=0), jnp.max(cluster_hi, axis=0)
@@ -241,14 +277,15 @@ def calc_soft_rigid_surface(
         hit, _, num_hit = compact_indices(boxes_overlap(cluster_lo, cluster_hi, region_lo[None], region_hi[None]), num_cluster_slots)
         candidates = members[jnp.maximum(hit, 0)].reshape(-1)
         safe_candidates = jnp.maximum(candidates, 0)
-        candidate_rows = tet_rows[safe_candidates]
-        near_mask = (candidates >= 0) & boxes_overlap(candidate_rows[:, 12:15], candidate_rows[:, 15:18], region_lo[None], region_hi[None])
+        candidate_boxes = tet_rows[:, TET_LO : TET_HI + 3][safe_candidates]  # the boxes only; whole rows for the near tets
+        near_mask = (candidates >= 0) & boxes_overlap(candidate_boxes[:, :3], candidate_boxes[:, 3:], region_lo[None], region_hi[None])
         near, near_valid, num_near = compact_indices(near_mask, capacity.tets)
-        near = jnp.maximum(near, 0)
-        near_tets, near_rows = safe_candidates[near], candidate_rows[near]
+        near_tets = safe_candidates[jnp.maximum(near, 0)]
+        near_rows = tet_rows[near_tets]
+        # The triangles near the soft body; their full rows only for those.
         tris, tris_valid, num_tris = compact_indices(boxes_overlap(tri_lo, tri_hi, region_lo[None], region_hi[None]), capacity.others)
         tris = jnp.maximum(tris, 0)
-        tri_rows = triangle_columns[:, tris].T
+        tri_rows = _triangle_rows(triangles[tris], tri_lo[tris], tri_hi[tris])
         # Every near tet against every near triangle by their boxes (cheap, dense);
         # the finer plane tests only on the pairs whose boxes meet; then the survivors.
         boxes_meet = _boxes_meet(near_rows.T[:, :, None], tri_rows.T[:, None, :])
@@ -256,36 +293,30 @@ def calc_soft_rigid_surface(
         candidate, candidate_valid, num_candidates = compact_indices(boxes_meet, capacity.pairs)
         candidate = jnp.maximum(candidate, 0)
         i, j = candidate // tris.shape[0], candidate % tris.shape[0]
-        candidate_tets, candidate_triangles = near_rows[i].T, tri_rows[j].T  # gathers from the small near lists
+        # The rows the plane tests read, gathered from the small near lists.
+        candidate_tets, candidate_triangles = _Columns(near_rows[:, :TET_TEST_ROWS][i]), _Columns(tri_rows[:, :TRI_TEST_ROWS][j])
         may_meet = candidate_valid & _planes_may_meet(candidate_tets, candidate_triangles)
         chosen, pair_valid, num_polygons = compact_indices(may_meet, capacity.polygons)
         chosen = jnp.maximum(chosen, 0)
         tet_index, tri_index = near_tets[i[chosen]], tris[j[chosen]]
-        # Gathered again from the small near lists: taking the chosen columns of the
-        # candidate tables instead ran 13 % slower on the CPU (benchmarks/RESULTS.md).
-        pair_tets, pair_triangles = near_rows[i[chosen]].T, tri_rows[j[chosen]].T
+        # Only the rows the clipping reads, gathered from the small near lists.
+        pair_tets = near_rows[:, :TET_CLIP_ROWS][i[chosen]].T
+        pair_triangles = tri_rows[:, :TRI_CLIP_ROWS][j[chosen]].T
         search_slots = num_cluster_slots * cluster_size
-        needed = jnp.array(
-            [jnp.maximum(num_near, -(-num_hit * cluster_size // CLUSTER_SEARCH)), num_tris, num_candidates, num_polygons]
-        )
-        overflow = (
-            (num_hit * cluster_size > search_slots)
-            | (num_near > capacity.tets)
-            | (num_tris > capacity.others)
-            | (num_candidates > capacity.pairs)
-            | (num_polygons > capacity.polygons)
-        )
+        needed = jnp.array([jnp.maximum(num_near, -(-num_hit * cluster_size // CLUSTER_SEARCH)), num_tris, num_candidates, num_polygons])
+        overflow = (num_hit * cluster_size > search_slots) | (num_near > capacity.tets) | (num_tris > capacity.others) | (num_candidates > capacity.pairs) | (num_polygons > capacity.polygons)
 
     num_polygons_slots = tet_index.shape[0]
-    normals = pair_triangles[15:18]  # (3, P)
-    corners = jnp.transpose(pair_triangles[:9].reshape(3, 3, num_polygons_slots), (1, 0, 2))  # (3 coordinates, 3 corners, P)
+    normals = pair_triangles[TRI_NORMAL : TRI_NORMAL + 3]  # (3, P)
+    corners = jnp.transpose(pair_triangles[TRI_VERTICES : TRI_VERTICES + 9].reshape(3, 3, num_polygons_slots), (1, 0, 2))  # (3 coordinates, 3 corners, P)
+    keep = is_normal_along_gradient(normals, pair_tets[TET_PRESSURE + 1 : TET_PRESSURE + 4], axis=0)
     face_normals, face_offsets, tie_drop = _resolve_face_ties(pair_tets, pair_triangles)
     vertices, counts = clip_polygon_by_tet_faces_columns(corners, jnp.full(tri_index.shape, 3), face_normals, face_offsets)
-    pair_gradients = pair_tets[40:43]
-    pressures = pair_tets[39][None] + jnp.sum(vertices * pair_gradients[:, None], axis=0)
-    pressures = jnp.where(jnp.arange(vertices.shape[1])[:, None] < counts[None], pressures, 0.0)
+    used = jnp.arange(vertices.shape[1])[:, None] < counts[None]
+    pair_gradients = pair_tets[TET_PRESSURE + 1 : TET_PRESSURE + 4]
+    pressures = pair_tets[TET_PRESSURE][None] + jnp.sum(vertices * pair_gradients[:, None], axis=0)
+    pressures = jnp.where(used, pressures, 0.0)
     area, integral, first_moment, pressure_moment = calc_polygon_integrals_columns(vertices, counts, pressures, normals)
     vertices, pressures = to_polygon_rows(vertices, pressures, POLYGON_CAPACITY)
     polygon = (vertices, pressures, counts, area, integral, first_moment.T, pressure_moment.T)
-    keep = jax.vmap(is_normal_along_gradient)(normals.T, pair_gradients.T) & ~tie_drop
-    return assemble_surface(polygon, normals.T, pair_valid, keep, tet_index, tri_index, overflow, needed)
+    return assemble_surface(polygon, normals.T, pair_valid, keep & ~tie_drop, tet_index, tri_index, overflow, needed)
