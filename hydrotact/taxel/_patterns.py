@@ -136,3 +136,45 @@ def calc_taxel_rays(position_S, axis_S, field_size, is_cone, num_rays: int):
     directions = jnp.where(is_cone, cone_directions, jnp.broadcast_to(axis[None], (num_rays, 3)))
     distances = jnp.where(is_cone, cone_angles, disk_offsets)
     return origins, directions, (field_size - distances) ** 2
+
+
+def calc_footprint_scale(field_size, is_cone, num_rays: int):
+    """The side of a ray's footprint square at the field's rim, in the taxel's ray
+    coordinates (see :func:`calc_taxel_footprints`): the largest of the taxel's."""
+    rim = jnp.where(is_cone, jnp.tan(jnp.where(is_cone, field_size, 0.0)), 0.0)
+    return _footprint_side(field_size, is_cone, rim, num_rays)
+
+
+def _footprint_side(field_size, is_cone, radius, num_rays):
+    """Side of a footprint square whose area is the ray's share of the field: pi r^2 / N
+    on a disk; on a cone the share 2 pi (1 - cos a) / N of solid angle, which the
+    gnomonic plane stretches by (1 + rho^2)^(3/2) at radius rho = tan(angle)."""
+    disk_area = jnp.pi * field_size**2 / num_rays
+    cone_size = jnp.where(is_cone, field_size, 0.0)
+    cone_area = 2.0 * jnp.pi * (1.0 - jnp.cos(cone_size)) / num_rays * (1.0 + radius**2) ** 1.5
+    return jnp.sqrt(jnp.where(is_cone, cone_area, disk_area))
+
+
+def calc_taxel_footprints(field_size, is_cone, num_rays: int):
+    """Each ray's footprint in the taxel's ray coordinates (pure; differentiable in
+    the size).
+
+    A ray is a point (X, Y) of a plane: on a disk, the ray's origin in the disk's
+    plane, X and Y along the (u, v) of :func:`calc_perpendicular_frame`; on a cone,
+    the gnomonic (central) projection of its direction, (X, Y) = tan(d) (cos, sin) of
+    its azimuth, where it meets the plane at unit distance along the axis. Its
+    footprint is the axis-aligned square of that plane centred on it whose area is
+    the ray's share of the field (:func:`_footprint_side`), so the squares roughly
+    tile the field; they shrink like N^-1/2.
+
+    **Returns:** (centres (N, 2), half sides (N,), weights (N,) as in
+    :func:`calc_taxel_rays`).
+    """
+    fractions, azimuths = (jnp.asarray(a, jnp.result_type(field_size, float)) for a in calc_spiral(num_rays))
+    cos_angles = 1.0 - (1.0 - jnp.cos(field_size)) * fractions
+    cone_angles = jnp.arccos(jnp.clip(cos_angles, -1.0, 1.0))
+    disk_offsets = field_size * jnp.sqrt(fractions)
+    radii = jnp.where(is_cone, jnp.tan(jnp.where(is_cone, cone_angles, 0.0)), disk_offsets)
+    centres = jnp.stack([radii * jnp.cos(azimuths), radii * jnp.sin(azimuths)], axis=-1)
+    distances = jnp.where(is_cone, cone_angles, disk_offsets)
+    return centres, 0.5 * _footprint_side(field_size, is_cone, radii, num_rays), (field_size - distances) ** 2
