@@ -36,7 +36,13 @@ import jax.numpy as jnp
 from .._math import safe_div, safe_sqrt
 
 PARALLEL_TOLERANCE = 1e-12  # as in intersect_ray_triangle: rays (nearly) parallel to the plane miss
-FRONT_TOLERANCE = 1e-12  # a corner must be this far in front of the taxel (relative to its distance)
+FRONT_TOLERANCE = 1e-12  # a disk's corner must be this far in front of the taxel (relative to its distance)
+# A cone's triangle counts only with every corner within acos(CONE_FRONT_COSINE) = 85
+# degrees of the axis: nearer the horizon its gnomonic projection runs off to
+# infinity, and the clip's round-off (relative to the footprint) grows with it.
+# Contact-surface triangles are far smaller than the 45-degree span from a field's
+# rim (< 90 degrees) out to there, so no visible triangle is lost in practice.
+CONE_FRONT_COSINE = 0.08715574274765817
 
 
 def _dot(a, b):
@@ -85,7 +91,8 @@ def calc_pair_geometry(origin, u, v, axis, corners, corner_pressures, is_cone, v
     facing = jnp.where(is_cone, _dot(local[0], normal), normal[2])
     reach = jnp.where(is_cone, safe_sqrt(_dot(local[0], local[0])), 1.0)
     sizes = [safe_sqrt(_dot(w, w)) for w in local]
-    in_front = (depths[0] > FRONT_TOLERANCE * sizes[0]) & (depths[1] > FRONT_TOLERANCE * sizes[1]) & (depths[2] > FRONT_TOLERANCE * sizes[2])
+    front = jnp.where(is_cone, CONE_FRONT_COSINE, FRONT_TOLERANCE)
+    in_front = (depths[0] > front * sizes[0]) & (depths[1] > front * sizes[1]) & (depths[2] > front * sizes[2])
     valid = valid & in_front & (jnp.abs(facing) > PARALLEL_TOLERANCE * normal_length * reach)
     doubled_area = (corners_x[1] - corners_x[0]) * (corners_y[2] - corners_y[0]) - (corners_y[1] - corners_y[0]) * (corners_x[2] - corners_x[0])
     return PairGeometry(corners_x, corners_y, depths, [corner_pressures[j] for j in range(3)], doubled_area, valid)

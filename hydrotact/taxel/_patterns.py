@@ -27,6 +27,7 @@ from .._math import safe_norm
 from .._types import Array, Bool, Float
 
 GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))
+FOOTPRINT_SCALE = 2.0
 
 
 class ReceptiveFieldKind(Choice):
@@ -152,7 +153,7 @@ def _footprint_side(field_size, is_cone, radius, num_rays):
     disk_area = jnp.pi * field_size**2 / num_rays
     cone_size = jnp.where(is_cone, field_size, 0.0)
     cone_area = 2.0 * jnp.pi * (1.0 - jnp.cos(cone_size)) / num_rays * (1.0 + radius**2) ** 1.5
-    return jnp.sqrt(jnp.where(is_cone, cone_area, disk_area))
+    return FOOTPRINT_SCALE * jnp.sqrt(jnp.where(is_cone, cone_area, disk_area))
 
 
 def calc_taxel_footprints(field_size, is_cone, num_rays: int):

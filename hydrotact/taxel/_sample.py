@@ -50,8 +50,9 @@ TIE_TOLERANCE = 1e-9
 # Pieces of the same sheet seen by one footprint lie within this many footprint
 # diagonals of each other along the ray (a sheet up to ~63 degrees from facing it).
 SHEET_SLOPE = 2.0
-# A piece covering less than this fraction of its footprint is not a hit (it cannot
-# set the nearest distance; its pressure would count for nothing anyway).
+# A piece covering less than this fraction of its footprint cannot set the nearest
+# distance (its centroid, and so its distance, is round-off); it still counts if it
+# lies on the nearest sheet.
 AREA_FLOOR = 1e-12
 
 
@@ -125,11 +126,13 @@ def _meets_receptive_field(position, axis, size, is_cone, centres, radii):
 def _see(pair_args, centres, halves, is_cone):
     """Footprints against triangles (:func:`calc_footprint_hits`; pair arguments of
     :func:`calc_pair_geometry`, broadcast against the rays' centres (..., 2) and half
-    sides): (covered, the pressure integral, the distance (+inf where not covered))."""
+    sides): (touched, the pressure integral, the distance, the distance where the piece
+    is large enough to set the nearest sheet (+inf elsewhere), the covered area)."""
     pair = calc_pair_geometry(*pair_args)
     area, pressure_integral, depth = calc_footprint_hits(pair, centres[..., 0], centres[..., 1], halves, is_cone)
+    depth = jax.lax.stop_gradient(depth)
     covered = jax.lax.stop_gradient(area > AREA_FLOOR * (2.0 * halves) ** 2)
-    return covered, pressure_integral, jnp.where(covered, jax.lax.stop_gradient(depth), jnp.inf), area
+    return area > 0.0, pressure_integral, depth, jnp.where(covered, depth, jnp.inf), area
 
 
 def _nearest_sheet(depth, nearest_depth, halves, is_cone):
@@ -178,8 +181,8 @@ def calc_taxel_pressures(
         def one_taxel(args):
             frame, is_cone, taxel_centres, taxel_halves = args
             pair_args = (*frame[..., None, None], jnp.transpose(corners, (1, 2, 0))[..., None, :], corner_pressures.T[:, None], is_cone, valid[None])
-            covered, integral, depth, area = _see(pair_args, taxel_centres[:, None], taxel_halves[:, None], is_cone)  # (num_rays, M)
-            nearest = covered & _nearest_sheet(depth, jnp.min(depth, axis=1, keepdims=True), taxel_halves[:, None], is_cone)
+            touched, integral, depth, sized_depth, area = _see(pair_args, taxel_centres[:, None], taxel_halves[:, None], is_cone)  # (num_rays, M)
+            nearest = touched & _nearest_sheet(depth, jnp.min(sized_depth, axis=1, keepdims=True), taxel_halves[:, None], is_cone)
             return jnp.sum(jnp.where(nearest, integral, 0.0), axis=1), jnp.sum(jnp.where(nearest, area, 0.0), axis=1)
 
         integrals, areas = jax.lax.map(one_taxel, (jnp.moveaxis(frames, 2, 0), layout.is_cone, centres, halves))
@@ -208,10 +211,10 @@ def calc_taxel_pressures(
     triangles = jnp.transpose(corners[triangle_of_pair], (1, 2, 0))[..., None]  # (3 corners, 3, capacity, 1)
     pair_args = (*pair_frames, triangles, corner_pressures[triangle_of_pair].T[..., None], is_cone, pair_valid[:, None])
     pair_halves = halves[taxel_of_pair]
-    covered, integral, depth, area = _see(pair_args, centres[taxel_of_pair], pair_halves, is_cone)
+    touched, integral, depth, sized_depth, area = _see(pair_args, centres[taxel_of_pair], pair_halves, is_cone)
     segments = {"segment_ids": taxel_of_pair, "num_segments": num_taxels, "indices_are_sorted": True}
-    nearest_depth = jax.ops.segment_min(depth, **segments)
-    nearest = covered & _nearest_sheet(depth, nearest_depth[taxel_of_pair], pair_halves, is_cone)
+    nearest_depth = jax.ops.segment_min(sized_depth, **segments)
+    nearest = touched & _nearest_sheet(depth, nearest_depth[taxel_of_pair], pair_halves, is_cone)
     integrals = jax.ops.segment_sum(jnp.where(nearest, integral, 0.0), **segments)
     areas = jax.ops.segment_sum(jnp.where(nearest, area, 0.0), **segments)
     pressures, coverage = _aggregate(integrals, areas, halves, weights)
