@@ -106,7 +106,10 @@ def _edge_function(pair: PairGeometry, j, x, y):
 
 
 def _clip_interval(start, slope, half):
-    """[lo, hi] of lambda in [0, 1] with |start + lambda slope| <= half (lo > hi: empty)."""
+    """[lo, hi] of lambda in [0, 1] with |start + lambda slope| <= half (lo > hi: empty).
+
+    Continuous in the slope through 0: a tiny slope gives huge bounds, the caller
+    clamps them to [0, 1], and the limit is the slope-0 answer (all or nothing)."""
     inverse = 1.0 / jnp.where(slope == 0.0, 1.0, slope)
     first, second = (-half - start) * inverse, (half - start) * inverse
     inside = jnp.abs(start) <= half
@@ -131,8 +134,11 @@ def calc_footprint_moments(pair: PairGeometry, centre_x, centre_y, half):
         step_x, step_y = pair.corners_x[k] - pair.corners_x[j], pair.corners_y[k] - pair.corners_y[j]
         lo_x, hi_x = _clip_interval(start_x, step_x, half)
         lo_y, hi_y = _clip_interval(start_y, step_y, half)
-        lo = jnp.maximum(jnp.maximum(lo_x, lo_y), 0.0)
-        hi = jnp.maximum(jnp.minimum(jnp.minimum(hi_x, hi_y), 1.0), lo)
+        # Clamped to [0, 1] so that a near-parallel edge's huge bounds never reach the
+        # arithmetic below (compiled code contracts it into fused multiply-adds, whose
+        # round-off is relative to the operands).
+        lo = jnp.clip(jnp.maximum(lo_x, lo_y), 0.0, 1.0)
+        hi = jnp.maximum(jnp.clip(jnp.minimum(hi_x, hi_y), 0.0, 1.0), lo)
         ax, ay = start_x + lo * step_x, start_y + lo * step_y
         bx, by = start_x + hi * step_x, start_y + hi * step_y
         rise = orientation * (by - ay)
@@ -144,18 +150,23 @@ def calc_footprint_moments(pair: PairGeometry, centre_x, centre_y, half):
     for side in (1.0, -1.0):
         lo, hi = -half, half
         for j in range(3):
-            # the edge function along the side, oriented to be >= 0 inside: at + slope_y (Y - centre_y)
+            # The edge function along the side, oriented to be >= 0 inside, is
+            # at + slope_y (Y - centre_y): a lower bound on Y where slope_y >= 0, an
+            # upper one where slope_y < 0. The root is clamped to the side, so a
+            # near-parallel edge (a tiny slope, a huge root) gives the slope-0 answer
+            # (all of the side or none, as at >= 0 or not) continuously, and no huge
+            # value reaches the moments below.
             k, m = (j + 1) % 3, (j + 2) % 3
             at = orientation * _edge_function(pair, j, centre_x + side * half, centre_y)
             slope_y = orientation * (pair.corners_x[m] - pair.corners_x[k])
-            root = -at / jnp.where(slope_y == 0.0, 1.0, slope_y)
-            lo = jnp.where(slope_y > 0.0, jnp.maximum(lo, root), lo)
+            root = jnp.clip(-at / jnp.where(slope_y == 0.0, 1.0, slope_y), -half, half)
+            root = jnp.where(slope_y == 0.0, jnp.where(at >= 0.0, -half, half), root)
+            lo = jnp.where(slope_y >= 0.0, jnp.maximum(lo, root), lo)
             hi = jnp.where(slope_y < 0.0, jnp.minimum(hi, root), hi)
-            hi = jnp.where((slope_y == 0.0) & (at < 0.0), lo, hi)
         hi = jnp.maximum(hi, lo)
         area = area + half * (hi - lo)
         moment_x = moment_x + side * 0.5 * half * half * (hi - lo)
-        moment_y = moment_y + 0.5 * half * (hi * hi - lo * lo)
+        moment_y = moment_y + 0.5 * half * (hi - lo) * (hi + lo)
     return tuple(jnp.where(pair.valid, m, 0.0) for m in (area, moment_x, moment_y))
 
 
