@@ -23,11 +23,16 @@ import numpy as np
 
 from .._choices import Choice
 from .._errors import HydrotactError
-from .._math import safe_norm
+from .._math import safe_norm, safe_sqrt
 from .._types import Array, Bool, Float
 
 GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))
-FOOTPRINT_SCALE = 2.0
+# A footprint's side over the side of the ray's share of the field: overlapping
+# squares (1.5 x 1.5 shares) even out the gaps and overlaps between neighbours that a
+# rim crossing the field would otherwise see as ripples.
+FOOTPRINT_SCALE = 1.5
+# Points per side of the midpoint grid over which a footprint's mean weight is taken.
+WEIGHT_GRID = 8
 
 
 class ReceptiveFieldKind(Choice):
@@ -156,6 +161,14 @@ def _footprint_side(field_size, is_cone, radius, num_rays):
     return FOOTPRINT_SCALE * jnp.sqrt(jnp.where(is_cone, cone_area, disk_area))
 
 
+def _field_weights(field_size, is_cone, x, y):
+    """The receptive field's weight max(r - d, 0)^2 at ray-plane points (x, y), d the
+    distance from the axis (disk) or the angle from it (cone)."""
+    rho = safe_sqrt(x * x + y * y)
+    distance = jnp.where(is_cone, jnp.arctan(rho), rho)
+    return jnp.maximum(field_size - distance, 0.0) ** 2
+
+
 def calc_taxel_footprints(field_size, is_cone, num_rays: int):
     """Each ray's footprint in the taxel's ray coordinates (pure; differentiable in
     the size).
@@ -164,12 +177,20 @@ def calc_taxel_footprints(field_size, is_cone, num_rays: int):
     plane, X and Y along the (u, v) of :func:`calc_perpendicular_frame`; on a cone,
     the gnomonic (central) projection of its direction, (X, Y) = tan(d) (cos, sin) of
     its azimuth, where it meets the plane at unit distance along the axis. Its
-    footprint is the axis-aligned square of that plane centred on it whose area is
-    the ray's share of the field (:func:`_footprint_side`), so the squares roughly
-    tile the field; they shrink like N^-1/2.
+    footprint is the axis-aligned square of that plane centred on it whose side is
+    FOOTPRINT_SCALE times that of the ray's share of the field
+    (:func:`_footprint_side`), so the squares overlap their neighbours; they shrink
+    like N^-1/2.
 
-    **Returns:** (centres (N, 2), half sides (N,), weights (N,) as in
-    :func:`calc_taxel_rays`).
+    The taxel reads sum_i w_i m_i / sum_i w_i with m_i the mean pressure over square
+    i: the pressure weighted by sum_i w_i box_i(X, Y), which blurs the field's weight
+    w = (r - d)^2 by a footprint, an error of the order of the footprint's area (2 %
+    of the peak at 64 rays on a rim sweep, converging like 1 / N). The weights are
+    deblurred by one van Cittert step, w_i = 2 w(ray) - (mean of w over its square)
+    (on a cone the mean per solid angle), clipped at 0, which leaves an error of the
+    order of the area squared.
+
+    **Returns:** (centres (N, 2), half sides (N,), weights (N,)).
     """
     fractions, azimuths = (jnp.asarray(a, jnp.result_type(field_size, float)) for a in calc_spiral(num_rays))
     cos_angles = 1.0 - (1.0 - jnp.cos(field_size)) * fractions
@@ -178,4 +199,11 @@ def calc_taxel_footprints(field_size, is_cone, num_rays: int):
     radii = jnp.where(is_cone, jnp.tan(jnp.where(is_cone, cone_angles, 0.0)), disk_offsets)
     centres = jnp.stack([radii * jnp.cos(azimuths), radii * jnp.sin(azimuths)], axis=-1)
     distances = jnp.where(is_cone, cone_angles, disk_offsets)
-    return centres, 0.5 * _footprint_side(field_size, is_cone, radii, num_rays), (field_size - distances) ** 2
+    halves = 0.5 * _footprint_side(field_size, is_cone, radii, num_rays)
+    grid = (np.arange(WEIGHT_GRID) + 0.5) / WEIGHT_GRID * 2.0 - 1.0
+    x = centres[:, 0, None, None] + halves[:, None, None] * grid[None, None, :]
+    y = centres[:, 1, None, None] + halves[:, None, None] * grid[None, :, None]
+    density = jnp.where(is_cone, (1.0 + x * x + y * y) ** -1.5, 1.0)  # solid angle per unit area of the plane
+    mean = jnp.sum(density * _field_weights(field_size, is_cone, x, y), axis=(1, 2)) / jnp.sum(density, axis=(1, 2))
+    weights = jnp.maximum(2.0 * (field_size - distances) ** 2 - mean, 0.0)
+    return centres, halves, weights
