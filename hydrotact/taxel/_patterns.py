@@ -33,6 +33,11 @@ GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))
 FOOTPRINT_SCALE = 1.5
 # Points per side of the midpoint grid over which a footprint's mean weight is taken.
 WEIGHT_GRID = 8
+# From this many rays per field, the deblurred weights are adjusted so that the
+# kernel's first and second moments are the field's (:func:`_match_moments`); fewer
+# rays leave the 5 x 5 system too thin (a single ray has no spread).
+MOMENT_MATCH_RAYS = 16
+MOMENT_NODES = 32
 
 
 class ReceptiveFieldKind(Choice):
@@ -188,7 +193,13 @@ def calc_taxel_footprints(field_size, is_cone, num_rays: int):
     of the peak at 64 rays on a rim sweep, converging like 1 / N). The weights are
     deblurred by one van Cittert step, w_i = 2 w(ray) - (mean of w over its square)
     (on a cone the mean per solid angle), clipped at 0, which leaves an error of the
-    order of the area squared.
+    order of the area squared. From MOMENT_MATCH_RAYS rays on, the weights are then
+    scaled by 1 + (a quadratic in the ray's position) so that the kernel
+    sum_i w_i box_i has the field weight's first and second moments exactly
+    (:func:`_match_moments`): a pressure quadratic across the field reads its exact
+    weighted mean, and the pad's rim sweep comes within 0.8 % of the converged
+    reading at 64 rays (1.2 % without). A uniform pressure reads exactly itself
+    whatever the weights (they are normalised).
 
     **Returns:** (centres (N, 2), half sides (N,), weights (N,)).
     """
@@ -206,4 +217,29 @@ def calc_taxel_footprints(field_size, is_cone, num_rays: int):
     density = jnp.where(is_cone, (1.0 + x * x + y * y) ** -1.5, 1.0)  # solid angle per unit area of the plane
     mean = jnp.sum(density * _field_weights(field_size, is_cone, x, y), axis=(1, 2)) / jnp.sum(density, axis=(1, 2))
     weights = jnp.maximum(2.0 * (field_size - distances) ** 2 - mean, 0.0)
+    if num_rays >= MOMENT_MATCH_RAYS:
+        weights = _match_moments(field_size, is_cone, centres, halves, weights)
     return centres, halves, weights
+
+
+def _match_moments(field_size, is_cone, centres, halves, weights):
+    """Weights w_i (1 + lambda . g_i), lambda such that the kernel sum_i w_i box_i has
+    the field's first and second moments: sum_i w_i g_i = 0 with g_i the moments (X,
+    Y, X^2, XY, Y^2) of square i (its centre's plus the square's own s^2 / 12) less
+    those of the field's weight, per unit of sum_i w_i (0, 0, m, 0, m; m half the mean
+    of rho^2 weighted by w = (r - d)^2 over the field, per solid angle on a cone, by
+    Gauss-Legendre in d). A 5 x 5 solve per taxel (differentiable), in units of the
+    field's radius in the ray plane."""
+    nodes, gauss = np.polynomial.legendre.leggauss(MOMENT_NODES)
+    distances = 0.5 * (nodes + 1.0) * field_size
+    cone_angles = jnp.where(is_cone, distances, 0.0)
+    rim = jnp.where(is_cone, jnp.tan(jnp.where(is_cone, field_size, 0.0)), field_size)
+    radii = jnp.where(is_cone, jnp.tan(cone_angles), distances) / rim
+    measure = gauss * (field_size - distances) ** 2 * jnp.where(is_cone, jnp.sin(cone_angles), distances)  # w dOmega or w rho drho
+    target = 0.5 * jnp.sum(measure * radii * radii) / jnp.sum(measure)
+    x, y = centres[:, 0] / rim, centres[:, 1] / rim
+    own = (2.0 * halves / rim) ** 2 / 12.0
+    g = jnp.stack([x, y, x * x + own - target, x * y, y * y + own - target], axis=1)
+    gram = jnp.einsum("i,ij,ik->jk", weights, g, g)
+    lam = jnp.linalg.solve(gram, -(weights @ g))
+    return weights * (1.0 + g @ lam)
