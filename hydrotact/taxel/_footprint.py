@@ -22,8 +22,12 @@ The part of a footprint square inside that triangle is a convex polygon; its are
 and first moments (int X, int Y) are boundary integrals (Green's theorem,
 int int f = contour int F dY with dF/dX = f): the triangle's edges clipped to the
 square (Liang-Barsky) plus the square's two vertical sides clipped to the triangle,
-each a segment on which F is a polynomial integrated exactly. Divisions happen once
-per pair; per (pair, ray) it is products and comparisons, elementwise. The pieces of
+each a segment on which F is a polynomial integrated exactly. Everything that depends
+on the pair alone (the edges' reciprocal slopes, the edge functions, the pressure's
+and the distance's affine coefficients, the clamps) is computed once per pair
+(:func:`calc_pair_geometry`); per (pair, ray) it is products, comparisons and a few
+divisions (by the footprint's area, the centroid's, the perspective division's),
+elementwise. The pieces of
 adjacent triangles tile the square (a shared edge is traversed once each way), so a
 footprint covered by a sheet of triangles sees exactly its area, however small the
 triangles are; a degenerate triangle has a piece of zero area.
@@ -31,6 +35,7 @@ triangles are; a degenerate triangle has a piece of zero area.
 
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 
 from .._math import safe_div, safe_sqrt
@@ -54,21 +59,54 @@ def _cross(a, b):
 
 
 class PairGeometry(NamedTuple):
-    """A triangle in a taxel's ray plane (one pair, or broadcastable columns of them).
+    """A triangle in a taxel's ray plane (one pair, or broadcastable columns of them),
+    with everything the footprints need that depends on the pair alone.
 
     - `corners_x`, `corners_y`: 3 lists of the projected corners' coordinates.
-    - `corner_depths`: 3 lists of the corners' distances along the taxel's axis.
-    - `corner_pressures`: 3 lists of the corners' pressures.
-    - `doubled_area`: the projected triangle's signed doubled area (> 0 counter-clockwise).
+    - `steps_x`, `steps_y`: 3 lists, edge j's vector from corner j to corner j + 1.
+    - `inverse_steps_x`, `inverse_steps_y`: their reciprocals (HUGE for a zero step:
+      the clip's all-or-nothing limit, clamped to [0, 1]).
+    - `edges`: 3 lists of the edge functions' affine coefficients (constant, along X,
+      along Y), oriented to be >= 0 inside; edge j is opposite corner j.
+    - `root_scales`, `root_offsets`: 3 lists: the root in Y of edge function j along a
+      vertical line is at * root_scale - root_offset, `at` its value at the line's
+      centre_y: the scale is -1 / (the Y coefficient), the offset 0; for a zero Y
+      coefficient, -HUGE and sqrt(HUGE), so that the clamped root is the bottom of the
+      line where at >= 0 (no bound) and the top where at < 0 (empty).
+    - `numerator`, `denominator`, `axial`: affine coefficients (constant, X, Y) of the
+      perspective-correct pressure's numerator and denominator and of the distance
+      along the axis's numerator: p = N / D, z = Z / D.
+    - `orientation`: +1 for a counter-clockwise projected triangle, -1 otherwise.
+    - `pressure_range`, `depth_range`: (lowest, highest) over the corners.
     - `valid`: the pair can be hit (valid triangle, in front, not seen edge-on).
     """
 
     corners_x: list
     corners_y: list
-    corner_depths: list
-    corner_pressures: list
-    doubled_area: object
+    steps_x: list
+    steps_y: list
+    inverse_steps_x: list
+    inverse_steps_y: list
+    edges: list
+    root_scales: list
+    root_offsets: list
+    numerator: list
+    denominator: list
+    axial: list
+    orientation: object
+    pressure_range: tuple
+    depth_range: tuple
     valid: object
+
+
+# A reciprocal standing in for 1 / 0: any nonzero offset it multiplies (footprints are
+# >> 1e-100 wide) lands far outside the clamp's range, giving the slope-0 limit.
+HUGE = 1e200
+
+
+def _reciprocal(value):
+    is_zero = value == 0.0
+    return jnp.where(is_zero, HUGE, 1.0 / jnp.where(is_zero, 1.0, value))
 
 
 def calc_pair_geometry(origin, u, v, axis, corners, corner_pressures, is_cone, valid) -> PairGeometry:
@@ -95,27 +133,64 @@ def calc_pair_geometry(origin, u, v, axis, corners, corner_pressures, is_cone, v
     in_front = (depths[0] > front * sizes[0]) & (depths[1] > front * sizes[1]) & (depths[2] > front * sizes[2])
     valid = valid & in_front & (jnp.abs(facing) > PARALLEL_TOLERANCE * normal_length * reach)
     doubled_area = (corners_x[1] - corners_x[0]) * (corners_y[2] - corners_y[0]) - (corners_y[1] - corners_y[0]) * (corners_x[2] - corners_x[0])
-    return PairGeometry(corners_x, corners_y, depths, [corner_pressures[j] for j in range(3)], doubled_area, valid)
+    orientation = jnp.where(doubled_area >= 0.0, 1.0, -1.0)
+    steps_x = [corners_x[(j + 1) % 3] - corners_x[j] for j in range(3)]
+    steps_y = [corners_y[(j + 1) % 3] - corners_y[j] for j in range(3)]
+    # Edge function j: twice the signed area of (corner j+1, corner j+2, (X, Y)), the
+    # projected triangle's barycentric coordinate j times its doubled area.
+    edges, raw_edges = [], []
+    for j in range(3):
+        k, m = (j + 1) % 3, (j + 2) % 3
+        along_x, along_y = -(corners_y[m] - corners_y[k]), corners_x[m] - corners_x[k]
+        constant = -along_x * corners_x[k] - along_y * corners_y[k]
+        raw_edges.append((constant, along_x, along_y))
+        edges.append(tuple(orientation * c for c in raw_edges[-1]))
+    # Perspective-correct interpolation: on a cone the barycentric coordinates over the
+    # corners' depths, normalised (D = sum_j b_j / z_j); on a disk D = 1.
+    inverse_area = safe_div(1.0, doubled_area)
+    scales = [jnp.where(is_cone, safe_div(inverse_area, depths[j]), inverse_area) for j in range(3)]
+    pressures = [corner_pressures[j] for j in range(3)]
+    numerator = [sum(scales[j] * pressures[j] * raw_edges[j][c] for j in range(3)) for c in range(3)]
+    denominator = [sum(scales[j] * raw_edges[j][c] for j in range(3)) for c in range(3)]
+    axial = [sum(scales[j] * depths[j] * raw_edges[j][c] for j in range(3)) for c in range(3)]
+
+    def corner_range(values):
+        return jnp.minimum(jnp.minimum(values[0], values[1]), values[2]), jnp.maximum(jnp.maximum(values[0], values[1]), values[2])
+
+    return PairGeometry(
+        corners_x,
+        corners_y,
+        steps_x,
+        steps_y,
+        [_reciprocal(step) for step in steps_x],
+        [_reciprocal(step) for step in steps_y],
+        edges,
+        [-_reciprocal(edge[2]) for edge in edges],
+        [jnp.where(edge[2] == 0.0, HUGE**0.5, 0.0) for edge in edges],
+        numerator,
+        denominator,
+        axial,
+        orientation,
+        corner_range(pressures),
+        corner_range(depths),
+        valid,
+    )
 
 
-def _edge_function(pair: PairGeometry, j, x, y):
-    """Twice the signed area of (corner j+1, corner j+2, (x, y)): the projected
-    triangle's barycentric coordinate j times its doubled area."""
-    k, m = (j + 1) % 3, (j + 2) % 3
-    return (pair.corners_x[m] - pair.corners_x[k]) * (y - pair.corners_y[k]) - (pair.corners_y[m] - pair.corners_y[k]) * (x - pair.corners_x[k])
+def _clip_interval(start, inverse_slope, half):
+    """[lo, hi] of lambda with |start + lambda slope| <= half (lo > hi: empty), before
+    clamping to [0, 1]. A zero slope's HUGE reciprocal gives huge bounds whose clamp
+    is the slope-0 answer (all or nothing), continuously in the slope."""
+    first, second = (-half - start) * inverse_slope, (half - start) * inverse_slope
+    return jnp.minimum(first, second), jnp.maximum(first, second)
 
 
-def _clip_interval(start, slope, half):
-    """[lo, hi] of lambda in [0, 1] with |start + lambda slope| <= half (lo > hi: empty).
+def _complex_dtype(value):
+    return jnp.result_type(value, jnp.complex64)
 
-    Continuous in the slope through 0: a tiny slope gives huge bounds, the caller
-    clamps them to [0, 1], and the limit is the slope-0 answer (all or nothing)."""
-    inverse = 1.0 / jnp.where(slope == 0.0, 1.0, slope)
-    first, second = (-half - start) * inverse, (half - start) * inverse
-    inside = jnp.abs(start) <= half
-    lo = jnp.where(slope == 0.0, jnp.where(inside, 0.0, 1.0), jnp.minimum(first, second))
-    hi = jnp.where(slope == 0.0, jnp.where(inside, 1.0, 0.0), jnp.maximum(first, second))
-    return lo, hi
+
+def _affine(coefficients, x, y):
+    return coefficients[0] + coefficients[1] * x + coefficients[2] * y
 
 
 def calc_footprint_moments(pair: PairGeometry, centre_x, centre_y, half):
@@ -124,16 +199,15 @@ def calc_footprint_moments(pair: PairGeometry, centre_x, centre_y, half):
 
     **Returns:** (area, int (X - centre_x), int (Y - centre_y)), 0 for invalid pairs.
     """
-    area, moment_x, moment_y = 0.0, 0.0, 0.0
-    orientation = jnp.where(pair.doubled_area >= 0.0, 1.0, -1.0)
     # The triangle's edges inside the square, counter-clockwise (contour int F dY with
-    # F = X, X^2 / 2, X Y for the area and the moments, exact on a segment).
+    # F = X, X^2 / 2, X Y for the area and the moments, exact on a segment; their
+    # constant factors and the orientation are applied to the sums).
+    edge_area, edge_x, edge_y = 0.0, 0.0, 0.0
     for j in range(3):
-        k = (j + 1) % 3
         start_x, start_y = pair.corners_x[j] - centre_x, pair.corners_y[j] - centre_y
-        step_x, step_y = pair.corners_x[k] - pair.corners_x[j], pair.corners_y[k] - pair.corners_y[j]
-        lo_x, hi_x = _clip_interval(start_x, step_x, half)
-        lo_y, hi_y = _clip_interval(start_y, step_y, half)
+        step_x, step_y = pair.steps_x[j], pair.steps_y[j]
+        lo_x, hi_x = _clip_interval(start_x, pair.inverse_steps_x[j], half)
+        lo_y, hi_y = _clip_interval(start_y, pair.inverse_steps_y[j], half)
         # Clamped to [0, 1] so that a near-parallel edge's huge bounds never reach the
         # arithmetic below (compiled code contracts it into fused multiply-adds, whose
         # round-off is relative to the operands).
@@ -141,39 +215,34 @@ def calc_footprint_moments(pair: PairGeometry, centre_x, centre_y, half):
         hi = jnp.maximum(jnp.clip(jnp.minimum(hi_x, hi_y), 0.0, 1.0), lo)
         ax, ay = start_x + lo * step_x, start_y + lo * step_y
         bx, by = start_x + hi * step_x, start_y + hi * step_y
-        rise = orientation * (by - ay)
-        area = area + rise * (ax + bx) * 0.5
-        moment_x = moment_x + rise * (ax * ax + ax * bx + bx * bx) * (1.0 / 6.0)
-        moment_y = moment_y + rise * (2.0 * ax * ay + ax * by + bx * ay + 2.0 * bx * by) * (1.0 / 6.0)
+        rise = by - ay
+        edge_area = edge_area + rise * (ax + bx)
+        edge_x = edge_x + rise * (ax * ax + ax * bx + bx * bx)
+        edge_y = edge_y + rise * (2.0 * ax * ay + ax * by + bx * ay + 2.0 * bx * by)
     # The square's vertical sides inside the triangle (its horizontal ones add nothing
     # to contour int F dY): the right one upwards, the left one downwards.
+    # The edge function along a side (>= 0 inside) is at + slope_y (Y - centre_y): a
+    # lower bound on Y where slope_y >= 0, an upper one where slope_y < 0. The root is
+    # clamped to the side, so a near-parallel edge (a tiny slope, a huge root) gives
+    # the slope-0 answer (all of the side or none, as at >= 0 or not) continuously,
+    # and no huge value reaches the moments below.
+    at_centre = [_affine(pair.edges[j], centre_x, centre_y) for j in range(3)]
+    lengths, squares = [], 0.0
     for side in (1.0, -1.0):
         lo, hi = -half, half
         for j in range(3):
-            # The edge function along the side, oriented to be >= 0 inside, is
-            # at + slope_y (Y - centre_y): a lower bound on Y where slope_y >= 0, an
-            # upper one where slope_y < 0. The root is clamped to the side, so a
-            # near-parallel edge (a tiny slope, a huge root) gives the slope-0 answer
-            # (all of the side or none, as at >= 0 or not) continuously, and no huge
-            # value reaches the moments below.
-            k, m = (j + 1) % 3, (j + 2) % 3
-            at = orientation * _edge_function(pair, j, centre_x + side * half, centre_y)
-            slope_y = orientation * (pair.corners_x[m] - pair.corners_x[k])
-            root = jnp.clip(-at / jnp.where(slope_y == 0.0, 1.0, slope_y), -half, half)
-            root = jnp.where(slope_y == 0.0, jnp.where(at >= 0.0, -half, half), root)
+            slope_y = pair.edges[j][2]
+            at = at_centre[j] + side * half * pair.edges[j][1]
+            root = jnp.clip(at * pair.root_scales[j] - pair.root_offsets[j], -half, half)
             lo = jnp.where(slope_y >= 0.0, jnp.maximum(lo, root), lo)
             hi = jnp.where(slope_y < 0.0, jnp.minimum(hi, root), hi)
         hi = jnp.maximum(hi, lo)
-        area = area + half * (hi - lo)
-        moment_x = moment_x + side * 0.5 * half * half * (hi - lo)
-        moment_y = moment_y + 0.5 * half * (hi - lo) * (hi + lo)
-    return tuple(jnp.where(pair.valid, m, 0.0) for m in (area, moment_x, moment_y))
-
-
-def _clamp_to_corners(value, corner_values):
-    lo = jnp.minimum(jnp.minimum(corner_values[0], corner_values[1]), corner_values[2])
-    hi = jnp.maximum(jnp.maximum(corner_values[0], corner_values[1]), corner_values[2])
-    return jnp.clip(value, lo, hi)
+        lengths.append(hi - lo)
+        squares = squares + (hi - lo) * (hi + lo)
+    area = 0.5 * pair.orientation * edge_area + half * (lengths[0] + lengths[1])
+    moment_x = (1.0 / 6.0) * pair.orientation * edge_x + 0.5 * half * half * (lengths[0] - lengths[1])
+    moment_y = (1.0 / 6.0) * pair.orientation * edge_y + 0.5 * half * squares
+    return jnp.where(pair.valid, area, 0.0), moment_x, moment_y
 
 
 def calc_footprint_hits(pair: PairGeometry, centre_x, centre_y, half, is_cone):
@@ -187,20 +256,22 @@ def calc_footprint_hits(pair: PairGeometry, centre_x, centre_y, half, is_cone):
     values respect, so that a sliver (a triangle seen nearly edge-on, whose
     centroid's round-off is large beside its width) cannot extrapolate.
 
-    **Returns:** (covered area, the pressure integrated over it, the distance along
-    the ray at the covered part's centroid).
+    **Returns:** (covered area, the pressure integral over it, both per unit of the
+    footprint's area, and the distance along the ray at the covered part's centroid).
     """
+    # Per unit of the footprint's area, the first moment as one complex number
+    # int (X + i Y): XLA's CPU fusion repeats cheap elementwise work inside every
+    # consumer of a result (here the clip, most of the work, five times over: the
+    # centroid's coordinates, the sheet's minimum, the sums), but not an expensive
+    # operation such as a division, and one complex result computes both moments in
+    # one pass. The clip is done twice, not five times.
+    footprint = 4.0 * half * half
     area, moment_x, moment_y = calc_footprint_moments(pair, centre_x, centre_y, half)
-    x, y = centre_x + safe_div(moment_x, area), centre_y + safe_div(moment_y, area)
-    inverse_area = safe_div(1.0, pair.doubled_area)
-    barycentric = [_edge_function(pair, j, x, y) * inverse_area for j in range(3)]
-    # On a cone the 3-D barycentric coordinates are those of the projection over the
-    # corners' depths, normalised (perspective-correct interpolation).
-    weights = [jnp.where(is_cone, safe_div(barycentric[j], pair.corner_depths[j]), barycentric[j]) for j in range(3)]
-    total = weights[0] + weights[1] + weights[2]
-    pressure = safe_div(weights[0] * pair.corner_pressures[0] + weights[1] * pair.corner_pressures[1] + weights[2] * pair.corner_pressures[2], total)
-    axial = safe_div(weights[0] * pair.corner_depths[0] + weights[1] * pair.corner_depths[1] + weights[2] * pair.corner_depths[2], total)
-    pressure = _clamp_to_corners(pressure, pair.corner_pressures)
-    axial = _clamp_to_corners(axial, pair.corner_depths)
+    area, moment = area / footprint, jax.lax.complex(moment_x, moment_y) / footprint.astype(_complex_dtype(moment_x))
+    inverse_area = safe_div(1.0, area)
+    x, y = centre_x + jnp.real(moment) * inverse_area, centre_y + jnp.imag(moment) * inverse_area
+    inverse_denominator = safe_div(1.0, _affine(pair.denominator, x, y))
+    pressure = jnp.clip(_affine(pair.numerator, x, y) * inverse_denominator, *pair.pressure_range)
+    axial = jnp.clip(_affine(pair.axial, x, y) * inverse_denominator, *pair.depth_range)
     depth = jnp.where(is_cone, axial * safe_sqrt(x * x + y * y + 1.0), axial)
     return area, area * pressure, depth

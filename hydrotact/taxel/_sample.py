@@ -123,35 +123,34 @@ def _meets_receptive_field(position, axis, size, is_cone, centres, radii):
     return jnp.where(is_cone[:, None], cone, disk)
 
 
-def _see(pair_args, centres, halves, is_cone):
+def _see(pair_args, centres_x, centres_y, halves, is_cone):
     """Footprints against triangles (:func:`calc_footprint_hits`; pair arguments of
-    :func:`calc_pair_geometry`, broadcast against the rays' centres (..., 2) and half
-    sides): (touched, the pressure integral, the distance, the distance where the piece
-    is large enough to set the nearest sheet (+inf elsewhere), the covered area)."""
+    :func:`calc_pair_geometry`, broadcast against the rays' centres and half sides,
+    each coordinate its own array):
+    (touched, the pressure integral, the distance, the distance where the piece is large
+    enough to set the nearest sheet (+inf elsewhere), the covered area)."""
     pair = calc_pair_geometry(*pair_args)
-    area, pressure_integral, depth = calc_footprint_hits(pair, centres[..., 0], centres[..., 1], halves, is_cone)
+    area, pressure_integral, depth = calc_footprint_hits(pair, centres_x, centres_y, halves, is_cone)
     depth = jax.lax.stop_gradient(depth)
-    covered = jax.lax.stop_gradient(area > AREA_FLOOR * (2.0 * halves) ** 2)
+    covered = jax.lax.stop_gradient(area > AREA_FLOOR)
     return area > 0.0, pressure_integral, depth, jnp.where(covered, depth, jnp.inf), area
 
 
-def _nearest_sheet(depth, nearest_depth, halves, is_cone):
-    """Whether pieces at distance `depth` belong to the sheet nearest the ray
-    (nearest_depth broadcast against depth): within SHEET_SLOPE footprint diagonals
-    (scaled to the distance on a cone) of the nearest piece's centroid, plus the
-    relative TIE_TOLERANCE."""
+def _sheet_limit(nearest_depth, halves, is_cone):
+    """The farthest distance of a piece on the sheet nearest the ray: within
+    SHEET_SLOPE footprint diagonals (scaled to the distance on a cone) of the nearest
+    piece's centroid, plus the relative TIE_TOLERANCE."""
     scale = jnp.where(is_cone, nearest_depth, 1.0)
     band = SHEET_SLOPE * 2.0 * jnp.sqrt(2.0) * halves * scale + TIE_TOLERANCE * nearest_depth
-    return jax.lax.stop_gradient(depth <= nearest_depth + band)
+    return jax.lax.stop_gradient(nearest_depth + band)
 
 
-def _aggregate(ray_pressure_integrals, ray_areas, halves, weights):
+def _aggregate(ray_pressure_integrals, ray_areas, weights):
     """Taxel value and coverage from per-ray integrals over the visible parts of the
-    footprints (a footprint's uncovered part reads 0)."""
-    footprint = (2.0 * halves) ** 2
+    footprints, per unit of the footprint's area (a footprint's uncovered part reads 0)."""
     total = jnp.sum(weights, axis=-1)
-    pressures = jnp.sum(weights * ray_pressure_integrals / footprint, axis=-1)
-    coverage = jnp.sum(weights * ray_areas / footprint, axis=-1)
+    pressures = jnp.sum(weights * ray_pressure_integrals, axis=-1)
+    coverage = jnp.sum(weights * ray_areas, axis=-1)
     return safe_div(pressures, total), safe_div(coverage, total)
 
 
@@ -181,12 +180,12 @@ def calc_taxel_pressures(
         def one_taxel(args):
             frame, is_cone, taxel_centres, taxel_halves = args
             pair_args = (*frame[..., None, None], jnp.transpose(corners, (1, 2, 0))[..., None, :], corner_pressures.T[:, None], is_cone, valid[None])
-            touched, integral, depth, sized_depth, area = _see(pair_args, taxel_centres[:, None], taxel_halves[:, None], is_cone)  # (num_rays, M)
-            nearest = touched & _nearest_sheet(depth, jnp.min(sized_depth, axis=1, keepdims=True), taxel_halves[:, None], is_cone)
+            touched, integral, depth, sized_depth, area = _see(pair_args, *taxel_centres[..., None], taxel_halves[:, None], is_cone)  # (num_rays, M)
+            nearest = touched & (depth <= _sheet_limit(jnp.min(sized_depth, axis=1, keepdims=True), taxel_halves[:, None], is_cone))
             return jnp.sum(jnp.where(nearest, integral, 0.0), axis=1), jnp.sum(jnp.where(nearest, area, 0.0), axis=1)
 
-        integrals, areas = jax.lax.map(one_taxel, (jnp.moveaxis(frames, 2, 0), layout.is_cone, centres, halves))
-        pressures, coverage = _aggregate(integrals, areas, halves, weights)
+        integrals, areas = jax.lax.map(one_taxel, (jnp.moveaxis(frames, 2, 0), layout.is_cone, jnp.moveaxis(centres, 2, 1), halves))
+        pressures, coverage = _aggregate(integrals, areas, weights)
         return TaxelReadings(pressures, coverage, jnp.asarray(False), jnp.asarray([valid.shape[0] * layout.num_taxels]))
 
     num_taxels = layout.num_taxels
@@ -210,14 +209,16 @@ def calc_taxel_pressures(
     is_cone = layout.is_cone[taxel_of_pair][:, None]
     triangles = jnp.transpose(corners[triangle_of_pair], (1, 2, 0))[..., None]  # (3 corners, 3, capacity, 1)
     pair_args = (*pair_frames, triangles, corner_pressures[triangle_of_pair].T[..., None], is_cone, pair_valid[:, None])
-    pair_halves = halves[taxel_of_pair]
-    touched, integral, depth, sized_depth, area = _see(pair_args, centres[taxel_of_pair], pair_halves, is_cone)
+    # Ray centres as rows (num_taxels, num_rays) per coordinate, gathered per pair.
+    touched, integral, depth, sized_depth, area = _see(
+        pair_args, centres[..., 0][taxel_of_pair], centres[..., 1][taxel_of_pair], halves[taxel_of_pair], is_cone
+    )
     segments = {"segment_ids": taxel_of_pair, "num_segments": num_taxels, "indices_are_sorted": True}
-    nearest_depth = jax.ops.segment_min(sized_depth, **segments)
-    nearest = touched & _nearest_sheet(depth, nearest_depth[taxel_of_pair], pair_halves, is_cone)
+    limit = _sheet_limit(jax.ops.segment_min(sized_depth, **segments), halves, layout.is_cone[:, None])
+    nearest = touched & (depth <= limit[taxel_of_pair])
     integrals = jax.ops.segment_sum(jnp.where(nearest, integral, 0.0), **segments)
     areas = jax.ops.segment_sum(jnp.where(nearest, area, 0.0), **segments)
-    pressures, coverage = _aggregate(integrals, areas, halves, weights)
+    pressures, coverage = _aggregate(integrals, areas, weights)
     return TaxelReadings(pressures, coverage, needed > capacity.pairs, needed[None])
 
 
