@@ -27,8 +27,12 @@ Two paths compute the same thing:
 - **culled** (default): each fan triangle's bounding sphere is tested against each
   taxel's receptive volume (a half-cylinder for a disk, a cone for a cone, widened by
   the footprints' reach); only the (taxel, triangle) pairs that pass, compacted into
-  a fixed-capacity buffer with an overflow flag, are cast, and the nearest sheet of
-  each ray is found by a segment minimum over its taxel's pairs. Cost ~ pairs x rays.
+  a fixed-capacity buffer with an overflow flag, are projected into the taxel's ray
+  plane; of their (pair, ray) combinations only those whose footprint meets the
+  projected triangle's bounding box (a cheap test; a few rays per pair), compacted
+  into a second buffer, are clipped, and the nearest sheet of each ray is found by a
+  segment minimum over its pieces. Cost ~ pairs x rays for the box test, pieces for
+  the clip.
 - **brute force**: every ray of every taxel against every triangle (the reference).
 """
 
@@ -61,7 +65,10 @@ class TaxelCapacity(AbstractCapacity):
     the order of :attr:`TaxelReadings.needed`.
 
     - `pairs`: candidate (taxel, surface triangle) pairs, those whose triangle's
-      bounding sphere meets the taxel's receptive volume; each is ray-cast.
+      bounding sphere meets the taxel's receptive volume.
+    - `pieces`: (pair, ray) combinations whose footprint meets the pair's projected
+      triangle's bounding box; each is clipped (a few per pair: the triangles are
+      about a footprint's size).
 
     Grown by the one rule of :meth:`hydrotact._buffers.AbstractCapacity.grown_to`.
     """
@@ -70,6 +77,7 @@ class TaxelCapacity(AbstractCapacity):
     advice: ClassVar[str] = "the contact surface has too many triangles near the taxels"
 
     pairs: int = eqx.field(static=True, default=4096)
+    pieces: int = eqx.field(static=True, default=8192)
 
 
 class TaxelReadings(eqx.Module):
@@ -80,16 +88,16 @@ class TaxelReadings(eqx.Module):
     - `pressures`: (num_taxels,) the weighted mean pressure over each receptive field,
       Pa (in the units of the surface's pressure).
     - `coverage`: (num_taxels,) the weight fraction of rays that hit, in [0, 1].
-    - `did_overflow`: True when the culled path had more candidate pairs than its
-      buffer (the readings are then incomplete).
-    - `needed`: (1,) the entries each buffer of :class:`TaxelCapacity` needed (the
-      candidate pairs).
+    - `did_overflow`: True when the culled path had more candidate pairs or pieces
+      than their buffers (the readings are then incomplete).
+    - `needed`: (2,) the entries each buffer of :class:`TaxelCapacity` needed (the
+      candidate pairs, the pieces).
     """
 
     pressures: Float[Array, " num_taxels"]
     coverage: Float[Array, " num_taxels"]
     did_overflow: Bool[Array, ""]
-    needed: Int[Array, " 1"]
+    needed: Int[Array, " 2"]
 
 
 def _meets_receptive_field(position, axis, size, is_cone, centres, radii):
@@ -165,8 +173,8 @@ def calc_taxel_pressures(
     - `layout`: the taxels (positions, axes, receptive fields), frame S.
     - `surface`: a :class:`hydrotact.contact.ContactSurface` in frame S.
     - `num_rays`: rays per receptive field (static).
-    - `capacity`: the culled path's buffer of candidate (taxel, triangle) pairs
-      (static); check `.did_overflow` or use :func:`sample_taxels`, which grows it.
+    - `capacity`: the culled path's buffers of candidate (taxel, triangle) pairs and
+      of (pair, ray) pieces (static); check `.did_overflow` or use :func:`sample_taxels`, which grows it.
     - `brute_force`: every ray against every triangle (the reference; never overflows).
     """
     corners, corner_pressures, valid = calc_surface_triangles(surface)
@@ -186,7 +194,7 @@ def calc_taxel_pressures(
 
         integrals, areas = jax.lax.map(one_taxel, (jnp.moveaxis(frames, 2, 0), layout.is_cone, jnp.moveaxis(centres, 2, 1), halves))
         pressures, coverage = _aggregate(integrals, areas, weights)
-        return TaxelReadings(pressures, coverage, jnp.asarray(False), jnp.asarray([valid.shape[0] * layout.num_taxels]))
+        return TaxelReadings(pressures, coverage, jnp.asarray(False), jnp.asarray([valid.shape[0] * layout.num_taxels, valid.shape[0] * layout.num_taxels * num_rays]))
 
     num_taxels = layout.num_taxels
     triangle_centres = jnp.mean(corners, axis=1)
@@ -199,27 +207,47 @@ def calc_taxel_pressures(
     meets = jax.lax.stop_gradient(meets & valid[None, :])
     flat, pair_valid, needed = compact_indices(meets, capacity.pairs)
     safe = jnp.maximum(flat, 0)
-    # Compaction keeps row-major order, so pairs come sorted by taxel; padding goes to
-    # the last taxel (with no hits) to keep them sorted for the segment reductions.
-    taxel_of_pair = jnp.where(pair_valid, safe // corners.shape[0], num_taxels - 1)
+    taxel_of_pair = safe // corners.shape[0]
     triangle_of_pair = safe % corners.shape[0]
 
-    # Pairs x rays, each a (capacity, num_rays) array: the work per ray is elementwise.
-    pair_frames = frames[:, :, taxel_of_pair][..., None]  # (4, 3, capacity, 1)
-    is_cone = layout.is_cone[taxel_of_pair][:, None]
-    triangles = jnp.transpose(corners[triangle_of_pair], (1, 2, 0))[..., None]  # (3 corners, 3, capacity, 1)
-    pair_args = (*pair_frames, triangles, corner_pressures[triangle_of_pair].T[..., None], is_cone, pair_valid[:, None])
-    # Ray centres as rows (num_taxels, num_rays) per coordinate, gathered per pair.
-    touched, integral, depth, sized_depth, area = _see(
-        pair_args, centres[..., 0][taxel_of_pair], centres[..., 1][taxel_of_pair], halves[taxel_of_pair], is_cone
-    )
-    segments = {"segment_ids": taxel_of_pair, "num_segments": num_taxels, "indices_are_sorted": True}
-    limit = _sheet_limit(jax.ops.segment_min(sized_depth, **segments), halves, layout.is_cone[:, None])
-    nearest = touched & (depth <= limit[taxel_of_pair])
-    integrals = jax.ops.segment_sum(jnp.where(nearest, integral, 0.0), **segments)
-    areas = jax.ops.segment_sum(jnp.where(nearest, area, 0.0), **segments)
+    # Each pair's triangle in its taxel's ray plane, once per pair ((capacity,) arrays).
+    pair_frames = frames[:, :, taxel_of_pair]  # (4, 3, capacity)
+    triangles = jnp.transpose(corners[triangle_of_pair], (1, 2, 0))  # (3 corners, 3, capacity)
+    pair = calc_pair_geometry(*pair_frames, triangles, corner_pressures[triangle_of_pair].T, layout.is_cone[taxel_of_pair], pair_valid)
+    # Pieces: the (pair, ray) combinations whose footprint meets the projected
+    # triangle's bounding box, compacted in turn (in the order of the pairs, then of
+    # the rays); elsewhere the footprint's piece is empty. Only they are clipped.
+    centres_x, centres_y = centres[..., 0][taxel_of_pair], centres[..., 1][taxel_of_pair]  # (capacity, num_rays)
+    pair_halves = halves[taxel_of_pair]
+
+    def overlaps(coordinates, ray_centres):
+        lowest = jnp.minimum(jnp.minimum(coordinates[0], coordinates[1]), coordinates[2])[:, None]
+        highest = jnp.maximum(jnp.maximum(coordinates[0], coordinates[1]), coordinates[2])[:, None]
+        return (lowest <= ray_centres + pair_halves) & (highest >= ray_centres - pair_halves)
+
+    touches = pair.valid[:, None] & overlaps(pair.corners_x, centres_x) & overlaps(pair.corners_y, centres_y)
+    flat_piece, piece_valid, pieces_needed = compact_indices(jax.lax.stop_gradient(touches), capacity.pieces)
+    safe_piece = jnp.maximum(flat_piece, 0)
+    pair_of_piece, ray_of_piece = safe_piece // num_rays, safe_piece % num_rays
+    taxel_of_piece = taxel_of_pair[pair_of_piece]
+    piece_pair = jax.tree_util.tree_map(lambda a: a[pair_of_piece], pair)
+    piece_pair = piece_pair._replace(valid=piece_pair.valid & piece_valid)
+    is_cone = layout.is_cone[taxel_of_piece]
+    at = (pair_of_piece, ray_of_piece)
+    area, integral, depth = calc_footprint_hits(piece_pair, centres_x[at], centres_y[at], pair_halves[at], is_cone)
+    depth = jax.lax.stop_gradient(depth)
+    covered = jax.lax.stop_gradient(area > AREA_FLOOR)
+    # Segments: (taxel, ray), flattened; pieces come sorted by pair, not by segment.
+    ray_of_segment = taxel_of_piece * num_rays + ray_of_piece
+    segments = {"segment_ids": ray_of_segment, "num_segments": num_taxels * num_rays}
+    nearest_depth = jax.ops.segment_min(jnp.where(covered, depth, jnp.inf), **segments).reshape(num_taxels, num_rays)
+    limit = _sheet_limit(nearest_depth, halves, layout.is_cone[:, None]).reshape(-1)
+    nearest = (area > 0.0) & (depth <= limit[ray_of_segment])
+    integrals = jax.ops.segment_sum(jnp.where(nearest, integral, 0.0), **segments).reshape(num_taxels, num_rays)
+    areas = jax.ops.segment_sum(jnp.where(nearest, area, 0.0), **segments).reshape(num_taxels, num_rays)
     pressures, coverage = _aggregate(integrals, areas, weights)
-    return TaxelReadings(pressures, coverage, needed > capacity.pairs, needed[None])
+    did_overflow = (needed > capacity.pairs) | (pieces_needed > capacity.pieces)
+    return TaxelReadings(pressures, coverage, did_overflow, jnp.stack([needed, pieces_needed]))
 
 
 _readings = eqx.filter_jit(calc_taxel_pressures)
