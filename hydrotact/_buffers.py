@@ -202,8 +202,10 @@ def compact_indices(mask, size: int):
         counts = jnp.cumsum(flags)
         slots = jnp.arange(1, size + 1, dtype=counts.dtype)
         found = jnp.searchsorted(counts, slots, side="left", method="scan_unrolled").astype(jnp.int32)
-        index = jnp.where(slots <= counts[-1], found, -1)
-        return index, index >= 0, counts[-1]
+        filled = slots <= counts[-1]
+        # `filled`, not index >= 0: XLA's CPU fusion would redo the whole search inside
+        # every consumer of the mask (cheap elementwise work is not kept).
+        return jnp.where(filled, found, -1), filled, counts[-1]
     position = _blocked_cumsum(flags)
     target = jnp.where(flags > 0, position - 1, size)
     index = jnp.full(size, -1, jnp.int32).at[target].set(jnp.arange(flags.shape[0], dtype=jnp.int32), mode="drop")

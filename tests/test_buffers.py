@@ -29,10 +29,10 @@ class _Result:
 def test_growth_rounds_each_buffer_to_8_to_15_times_a_power_of_two():
     grown = Capacity(256, 256, 4096, 1024).grown_to([300, 10, 4097, 1025])
     assert grown.sizes == (320, 256, 4608, 1152)  # 10 x 32, kept, 9 x 512, 9 x 128
-    assert TaxelCapacity(8).grown_to([1000]) == TaxelCapacity(1024)  # 8 x 128
-    assert TaxelCapacity(8).grown_to([1025]) == TaxelCapacity(1152)
+    assert TaxelCapacity(8).grown_to([1000, 0]) == TaxelCapacity(1024)  # 8 x 128
+    assert TaxelCapacity(8).grown_to([1025, 0]) == TaxelCapacity(1152)
     for need in range(1, 5000, 37):
-        size = TaxelCapacity(0).grown_to([need]).pairs
+        size = TaxelCapacity(0).grown_to([need, 0]).pairs
         assert need <= size <= max(8, need * 9 // 8 + 1), (need, size)
         assert size in {m << k for m in range(8, 16) for k in range(12)} or size == need
 
@@ -47,8 +47,8 @@ def test_growth_never_shrinks_and_doubles_when_nothing_maps():
 
 def test_growth_past_the_limit_is_a_clear_error(monkeypatch):
     with pytest.raises(HydrotactError, match=f"taxel sampling needs more than {MAX_BUFFER} entries in its pairs buffer"):
-        TaxelCapacity().grown_to([MAX_BUFFER + 1])
-    assert TaxelCapacity().grown_to([MAX_BUFFER]).pairs == MAX_BUFFER
+        TaxelCapacity().grown_to([MAX_BUFFER + 1, 0])
+    assert TaxelCapacity().grown_to([MAX_BUFFER, 0]).pairs == MAX_BUFFER
     monkeypatch.setattr(_buffers, "MAX_BUFFER", 64)
     with pytest.raises(HydrotactError, match="the contact needs more than 64 entries in its polygons buffer"):
         Capacity(16, 16, 32, 32).grown_to([16, 16, 32, 65])

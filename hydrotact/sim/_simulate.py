@@ -48,7 +48,7 @@ class UnitResponse(eqx.Module):
     each per pascal of E; `normal_S` (3,) the inward skin normal at the contact (0
     without contact); `contact_point_S` (3,) the centre of pressure, m; `area` m^2;
     `did_overflow` (a buffer was too small: the response is incomplete) and `needed`
-    (5,) the entries each buffer of :class:`SimCapacity` needed, for the host to grow
+    (6,) the entries each buffer of :class:`SimCapacity` needed, for the host to grow
     them (:func:`hydrotact._buffers.run_growing`).
     """
 
@@ -59,7 +59,7 @@ class UnitResponse(eqx.Module):
     contact_point_S: Float[Array, " 3"]
     area: Float[Array, ""]
     did_overflow: Bool[Array, ""]
-    needed: Int[Array, " 5"]
+    needed: Int[Array, " 6"]
 
 
 class Samples(eqx.Module):
@@ -90,8 +90,8 @@ class SimCapacity(AbstractCapacity):
     """Buffer sizes of a simulation (static: changing one recompiles), in the order of
     :attr:`UnitResponse.needed`: the contact broad phase's `tets`, `others`, `pairs`
     and `polygons` (:class:`hydrotact.contact.Capacity`), then the taxel sampler's
-    candidate `taxel_pairs` (:class:`hydrotact.taxel.TaxelCapacity`). Grown by the one
-    rule of :meth:`hydrotact._buffers.AbstractCapacity.grown_to`.
+    candidate `taxel_pairs` and its `taxel_pieces` (:class:`hydrotact.taxel.TaxelCapacity`).
+    Grown by the one rule of :meth:`hydrotact._buffers.AbstractCapacity.grown_to`.
     """
 
     purpose: ClassVar[str] = "the simulation"
@@ -102,6 +102,7 @@ class SimCapacity(AbstractCapacity):
     pairs: int = eqx.field(static=True, default=Capacity().pairs)
     polygons: int = eqx.field(static=True, default=Capacity().polygons)
     taxel_pairs: int = eqx.field(static=True, default=TaxelCapacity().pairs)
+    taxel_pieces: int = eqx.field(static=True, default=TaxelCapacity().pieces)
 
     @classmethod
     def of(cls, contact: Capacity = Capacity(), taxel: TaxelCapacity = TaxelCapacity()) -> "SimCapacity":
@@ -114,7 +115,7 @@ class SimCapacity(AbstractCapacity):
 
     @property
     def taxel(self) -> TaxelCapacity:
-        return TaxelCapacity(self.taxel_pairs)
+        return TaxelCapacity(self.taxel_pairs, self.taxel_pieces)
 
 
 def calc_unit_response(model: SensorModel, probe, X_SR: Pose, capacity: SimCapacity = SimCapacity()) -> UnitResponse:

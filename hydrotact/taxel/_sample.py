@@ -1,18 +1,38 @@
-"""What each taxel reads: its rays cast at the contact surface, aggregated.
+"""What each taxel reads: its rays' footprints cast at the contact surface, aggregated.
 
-Each ray takes the pressure at its first hit on the contact surface (barycentric
-interpolation of the polygon's linear pressure; several triangles hit at the same
-distance, as through a shared edge, are averaged); a ray that misses reads 0. The
-taxel reads p = sum_i w_i p_i / sum_i w_i over all its rays (misses included), with
-the receptive field's weights w_i = (r - d_i)^2.
+Each ray stands for a small square footprint of its receptive field (its share of
+the field's area, or of its solid angle; :func:`calc_taxel_footprints`) and reads the
+mean pressure over that square of the nearest sheet of the contact surface, the
+uncovered part reading 0: the exact integral of each triangle's linear pressure over
+the part of the square inside the triangle (:mod:`._footprint`). A point sample would
+jump as a polygon's rim with p > 0 (a flat probe's edge, where the visible sheet
+ends) crosses the ray; the footprint's covered area, and so the reading, moves
+continuously with the surface, and pieces of adjacent triangles tile the square, so
+interior edges and tiny or degenerate triangles count exactly. As N grows the
+footprints shrink to points and the reading converges to the point-sampled weighted
+mean. The taxel reads p = sum_i w_i p_i / sum_i w_i over all its rays, with the
+receptive field's weights w_i = (r - d_i)^2.
+
+Occlusion is decided per (ray, triangle) piece, not per point: a piece counts if the
+distance along the ray at its centroid is within SHEET_SLOPE footprint diagonals of
+the nearest piece's (the pieces of one sheet lie within its slope times the
+footprint's size of each other; distinct sheets are further apart). This is the
+approximate part: a second sheet closer than that band is added rather than hidden
+(e.g. a tilted flat probe's side wall, over a sliver of area proportional to the
+tilt), and where two sheets overlap within one footprint the nearer one hides all
+of the other's pieces whose centroids lie behind the band.
 
 Two paths compute the same thing:
 
 - **culled** (default): each fan triangle's bounding sphere is tested against each
-  taxel's receptive volume (a half-cylinder for a disk, a cone for a cone); only the
-  (taxel, triangle) pairs that pass, compacted into a fixed-capacity buffer with an
-  overflow flag, are ray-cast, and the nearest hit of each ray is found by a segment
-  minimum over its taxel's pairs. Cost ~ pairs x rays.
+  taxel's receptive volume (a half-cylinder for a disk, a cone for a cone, widened by
+  the footprints' reach); only the (taxel, triangle) pairs that pass, compacted into
+  a fixed-capacity buffer with an overflow flag, are projected into the taxel's ray
+  plane; of their (pair, ray) combinations only those whose footprint meets the
+  projected triangle's bounding box (a cheap test; a few rays per pair), compacted
+  into a second buffer, are clipped, and the nearest sheet of each ray is found by a
+  segment minimum over its pieces. Cost ~ pairs x rays for the box test, pieces for
+  the clip.
 - **brute force**: every ray of every taxel against every triangle (the reference).
 """
 
@@ -25,16 +45,19 @@ import jax.numpy as jnp
 from .._buffers import AbstractCapacity, compact_indices, run_growing
 from .._math import safe_div, safe_norm, safe_sqrt
 from .._types import Array, Bool, Float, Int
-from ._patterns import TaxelLayout, calc_taxel_rays
-from ._raycast import calc_surface_triangles, intersect_ray_triangle
+from ._footprint import calc_footprint_hits, calc_pair_geometry
+from ._patterns import TaxelLayout, calc_footprint_scale, calc_perpendicular_frame, calc_taxel_footprints
+from ._raycast import calc_surface_triangles
 
-# A ray's hits within this relative distance of its nearest one count as the nearest
-# too, and are averaged: a ray along an edge shared by two triangles (see
-# intersect_ray_triangle) hits both at the same t up to round-off, which exact
-# equality would split by the last bit, one-sidedly and differently from one
-# compilation to the next; the average gives the edge's pressure and the symmetric
-# derivative. (Distinct sheets of a contact surface are far further apart.)
+# Relative slack on the nearest distance (round-off between the pieces of one sheet).
 TIE_TOLERANCE = 1e-9
+# Pieces of the same sheet seen by one footprint lie within this many footprint
+# diagonals of each other along the ray (a sheet up to ~63 degrees from facing it).
+SHEET_SLOPE = 2.0
+# A piece covering less than this fraction of its footprint cannot set the nearest
+# distance (its centroid, and so its distance, is round-off); it still counts if it
+# lies on the nearest sheet.
+AREA_FLOOR = 1e-12
 
 
 class TaxelCapacity(AbstractCapacity):
@@ -42,7 +65,10 @@ class TaxelCapacity(AbstractCapacity):
     the order of :attr:`TaxelReadings.needed`.
 
     - `pairs`: candidate (taxel, surface triangle) pairs, those whose triangle's
-      bounding sphere meets the taxel's receptive volume; each is ray-cast.
+      bounding sphere meets the taxel's receptive volume.
+    - `pieces`: (pair, ray) combinations whose footprint meets the pair's projected
+      triangle's bounding box; each is clipped (a few per pair: the triangles are
+      about a footprint's size).
 
     Grown by the one rule of :meth:`hydrotact._buffers.AbstractCapacity.grown_to`.
     """
@@ -51,6 +77,7 @@ class TaxelCapacity(AbstractCapacity):
     advice: ClassVar[str] = "the contact surface has too many triangles near the taxels"
 
     pairs: int = eqx.field(static=True, default=4096)
+    pieces: int = eqx.field(static=True, default=8192)
 
 
 class TaxelReadings(eqx.Module):
@@ -61,16 +88,16 @@ class TaxelReadings(eqx.Module):
     - `pressures`: (num_taxels,) the weighted mean pressure over each receptive field,
       Pa (in the units of the surface's pressure).
     - `coverage`: (num_taxels,) the weight fraction of rays that hit, in [0, 1].
-    - `did_overflow`: True when the culled path had more candidate pairs than its
-      buffer (the readings are then incomplete).
-    - `needed`: (1,) the entries each buffer of :class:`TaxelCapacity` needed (the
-      candidate pairs).
+    - `did_overflow`: True when the culled path had more candidate pairs or pieces
+      than their buffers (the readings are then incomplete).
+    - `needed`: (2,) the entries each buffer of :class:`TaxelCapacity` needed (the
+      candidate pairs, the pieces).
     """
 
     pressures: Float[Array, " num_taxels"]
     coverage: Float[Array, " num_taxels"]
     did_overflow: Bool[Array, ""]
-    needed: Int[Array, " 1"]
+    needed: Int[Array, " 2"]
 
 
 def _meets_receptive_field(position, axis, size, is_cone, centres, radii):
@@ -104,28 +131,35 @@ def _meets_receptive_field(position, axis, size, is_cone, centres, radii):
     return jnp.where(is_cone[:, None], cone, disk)
 
 
-def _cast(origin, direction, triangle, pressures, is_valid):
-    """Rays against triangles (one against one, or columns that broadcast, as
-    :func:`intersect_ray_triangle` takes them; `triangle` (3 corners, 3, ...),
-    `pressures` (3 corners, ...)): (hit, distance t (+inf on a miss), pressure
-    interpolated at the hit (0 on a miss))."""
-    hit, t, u, v = intersect_ray_triangle(origin, direction, triangle[0], triangle[1], triangle[2])
-    hit = hit & is_valid
-    pressure = (1.0 - u - v) * pressures[0] + u * pressures[1] + v * pressures[2]
-    return hit, jnp.where(hit, t, jnp.inf), jnp.where(hit, pressure, 0.0)
+def _see(pair_args, centres_x, centres_y, halves, is_cone):
+    """Footprints against triangles (:func:`calc_footprint_hits`; pair arguments of
+    :func:`calc_pair_geometry`, broadcast against the rays' centres and half sides,
+    each coordinate its own array):
+    (touched, the pressure integral, the distance, the distance where the piece is large
+    enough to set the nearest sheet (+inf elsewhere), the covered area)."""
+    pair = calc_pair_geometry(*pair_args)
+    area, pressure_integral, depth = calc_footprint_hits(pair, centres_x, centres_y, halves, is_cone)
+    depth = jax.lax.stop_gradient(depth)
+    covered = jax.lax.stop_gradient(area > AREA_FLOOR)
+    return area > 0.0, pressure_integral, depth, jnp.where(covered, depth, jnp.inf), area
 
 
-def _is_nearest(t, nearest_t):
-    """Whether hits at distances t count as the nearest (nearest_t broadcast against t)."""
-    return jax.lax.stop_gradient(t <= nearest_t * (1.0 + TIE_TOLERANCE))
+def _sheet_limit(nearest_depth, halves, is_cone):
+    """The farthest distance of a piece on the sheet nearest the ray: within
+    SHEET_SLOPE footprint diagonals (scaled to the distance on a cone) of the nearest
+    piece's centroid, plus the relative TIE_TOLERANCE."""
+    scale = jnp.where(is_cone, nearest_depth, 1.0)
+    band = SHEET_SLOPE * 2.0 * jnp.sqrt(2.0) * halves * scale + TIE_TOLERANCE * nearest_depth
+    return jax.lax.stop_gradient(nearest_depth + band)
 
 
-def _aggregate(ray_pressure_sums, ray_hit_counts, weights):
-    """Taxel value and coverage from per-ray sums of nearest-hit pressures and counts."""
-    ray_pressures = safe_div(ray_pressure_sums, ray_hit_counts)
+def _aggregate(ray_pressure_integrals, ray_areas, weights):
+    """Taxel value and coverage from per-ray integrals over the visible parts of the
+    footprints, per unit of the footprint's area (a footprint's uncovered part reads 0)."""
     total = jnp.sum(weights, axis=-1)
-    hit_weight = jnp.sum(jnp.where(ray_hit_counts > 0, weights, 0.0), axis=-1)
-    return safe_div(jnp.sum(weights * ray_pressures, axis=-1), total), safe_div(hit_weight, total)
+    pressures = jnp.sum(weights * ray_pressure_integrals, axis=-1)
+    coverage = jnp.sum(weights * ray_areas, axis=-1)
+    return safe_div(pressures, total), safe_div(coverage, total)
 
 
 def calc_taxel_pressures(
@@ -139,50 +173,81 @@ def calc_taxel_pressures(
     - `layout`: the taxels (positions, axes, receptive fields), frame S.
     - `surface`: a :class:`hydrotact.contact.ContactSurface` in frame S.
     - `num_rays`: rays per receptive field (static).
-    - `capacity`: the culled path's buffer of candidate (taxel, triangle) pairs
-      (static); check `.did_overflow` or use :func:`sample_taxels`, which grows it.
+    - `capacity`: the culled path's buffers of candidate (taxel, triangle) pairs and
+      of (pair, ray) pieces (static); check `.did_overflow` or use :func:`sample_taxels`, which grows it.
     - `brute_force`: every ray against every triangle (the reference; never overflows).
     """
     corners, corner_pressures, valid = calc_surface_triangles(surface)
-    origins, directions, weights = jax.vmap(calc_taxel_rays, in_axes=(0, 0, 0, 0, None))(
-        layout.positions_S, layout.axes_S, layout.field_sizes, layout.is_cone, num_rays
-    )
+    centres, halves, weights = jax.vmap(calc_taxel_footprints, in_axes=(0, 0, None))(layout.field_sizes, layout.is_cone, num_rays)
+    axes = layout.axes_S / safe_norm(layout.axes_S, axis=1, keepdims=True)
+    us, vs = jax.vmap(calc_perpendicular_frame)(axes)
+    # (positions, u, v, axes) per taxel, coordinates first: (4, 3, num_taxels)
+    frames = jnp.stack([layout.positions_S.T, us.T, vs.T, axes.T])
     if brute_force:
 
         def one_taxel(args):
-            rays_vs_triangles = jax.vmap(jax.vmap(_cast, in_axes=(None, None, 0, 0, 0)), in_axes=(0, 0, None, None, None))
-            hit, t, pressure = rays_vs_triangles(*args, corners, corner_pressures, valid)  # (num_rays, M)
-            nearest = hit & _is_nearest(t, jnp.min(t, axis=1, keepdims=True))
-            return jnp.sum(jnp.where(nearest, pressure, 0.0), axis=1), jnp.sum(nearest, axis=1)
+            frame, is_cone, taxel_centres, taxel_halves = args
+            pair_args = (*frame[..., None, None], jnp.transpose(corners, (1, 2, 0))[..., None, :], corner_pressures.T[:, None], is_cone, valid[None])
+            touched, integral, depth, sized_depth, area = _see(pair_args, *taxel_centres[..., None], taxel_halves[:, None], is_cone)  # (num_rays, M)
+            nearest = touched & (depth <= _sheet_limit(jnp.min(sized_depth, axis=1, keepdims=True), taxel_halves[:, None], is_cone))
+            return jnp.sum(jnp.where(nearest, integral, 0.0), axis=1), jnp.sum(jnp.where(nearest, area, 0.0), axis=1)
 
-        sums, counts = jax.lax.map(one_taxel, (origins, directions))
-        pressures, coverage = _aggregate(sums, counts, weights)
-        return TaxelReadings(pressures, coverage, jnp.asarray(False), jnp.asarray([valid.shape[0] * layout.num_taxels]))
+        integrals, areas = jax.lax.map(one_taxel, (jnp.moveaxis(frames, 2, 0), layout.is_cone, jnp.moveaxis(centres, 2, 1), halves))
+        pressures, coverage = _aggregate(integrals, areas, weights)
+        return TaxelReadings(pressures, coverage, jnp.asarray(False), jnp.asarray([valid.shape[0] * layout.num_taxels, valid.shape[0] * layout.num_taxels * num_rays]))
 
     num_taxels = layout.num_taxels
-    centres = jnp.mean(corners, axis=1)
-    radii = jnp.max(safe_norm(corners - centres[:, None], axis=-1), axis=1)
-    meets = _meets_receptive_field(layout.positions_S.T, layout.axes_S.T, layout.field_sizes, layout.is_cone, centres.T, radii)
+    triangle_centres = jnp.mean(corners, axis=1)
+    radii = jnp.max(safe_norm(corners - triangle_centres[:, None], axis=-1), axis=1)
+    # The footprints reach past the field by half a footprint's diagonal.
+    reach = calc_footprint_scale(layout.field_sizes, layout.is_cone, num_rays) / jnp.sqrt(2.0)
+    cone_sizes = jnp.arctan(jnp.tan(jnp.where(layout.is_cone, layout.field_sizes, 0.0)) + reach)
+    sizes = jnp.where(layout.is_cone, cone_sizes, layout.field_sizes + reach)
+    meets = _meets_receptive_field(layout.positions_S.T, axes.T, sizes, layout.is_cone, triangle_centres.T, radii)
     meets = jax.lax.stop_gradient(meets & valid[None, :])
     flat, pair_valid, needed = compact_indices(meets, capacity.pairs)
     safe = jnp.maximum(flat, 0)
-    # Compaction keeps row-major order, so pairs come sorted by taxel; padding goes to
-    # the last taxel (with no hits) to keep them sorted for the segment reductions.
-    taxel_of_pair = jnp.where(pair_valid, safe // corners.shape[0], num_taxels - 1)
+    taxel_of_pair = safe // corners.shape[0]
     triangle_of_pair = safe % corners.shape[0]
 
-    # Pairs x rays, each coordinate a (capacity, num_rays) row: the test is elementwise.
-    ray_origins = jnp.transpose(origins, (2, 0, 1))[:, taxel_of_pair]  # (3, capacity, num_rays)
-    ray_directions = jnp.transpose(directions, (2, 0, 1))[:, taxel_of_pair]
-    triangles = jnp.transpose(corners[triangle_of_pair], (1, 2, 0))[..., None]  # (3 corners, 3, capacity, 1)
-    hit, t, pressure = _cast(ray_origins, ray_directions, triangles, corner_pressures[triangle_of_pair].T[..., None], pair_valid[:, None])
-    segments = {"segment_ids": taxel_of_pair, "num_segments": num_taxels, "indices_are_sorted": True}
-    nearest_t = jax.ops.segment_min(jax.lax.stop_gradient(t), **segments)
-    nearest = hit & _is_nearest(t, nearest_t[taxel_of_pair])
-    sums = jax.ops.segment_sum(jnp.where(nearest, pressure, 0.0), **segments)
-    counts = jax.ops.segment_sum(nearest.astype(jnp.int32), **segments)
-    pressures, coverage = _aggregate(sums, counts, weights)
-    return TaxelReadings(pressures, coverage, needed > capacity.pairs, needed[None])
+    # Each pair's triangle in its taxel's ray plane, once per pair ((capacity,) arrays).
+    pair_frames = frames[:, :, taxel_of_pair]  # (4, 3, capacity)
+    triangles = jnp.transpose(corners[triangle_of_pair], (1, 2, 0))  # (3 corners, 3, capacity)
+    pair = calc_pair_geometry(*pair_frames, triangles, corner_pressures[triangle_of_pair].T, layout.is_cone[taxel_of_pair], pair_valid)
+    # Pieces: the (pair, ray) combinations whose footprint meets the projected
+    # triangle's bounding box, compacted in turn (in the order of the pairs, then of
+    # the rays); elsewhere the footprint's piece is empty. Only they are clipped.
+    centres_x, centres_y = centres[..., 0][taxel_of_pair], centres[..., 1][taxel_of_pair]  # (capacity, num_rays)
+    pair_halves = halves[taxel_of_pair]
+
+    def overlaps(coordinates, ray_centres):
+        lowest = jnp.minimum(jnp.minimum(coordinates[0], coordinates[1]), coordinates[2])[:, None]
+        highest = jnp.maximum(jnp.maximum(coordinates[0], coordinates[1]), coordinates[2])[:, None]
+        return (lowest <= ray_centres + pair_halves) & (highest >= ray_centres - pair_halves)
+
+    touches = pair.valid[:, None] & overlaps(pair.corners_x, centres_x) & overlaps(pair.corners_y, centres_y)
+    flat_piece, piece_valid, pieces_needed = compact_indices(jax.lax.stop_gradient(touches), capacity.pieces)
+    safe_piece = jnp.maximum(flat_piece, 0)
+    pair_of_piece, ray_of_piece = safe_piece // num_rays, safe_piece % num_rays
+    taxel_of_piece = taxel_of_pair[pair_of_piece]
+    piece_pair = jax.tree_util.tree_map(lambda a: a[pair_of_piece], pair)
+    piece_pair = piece_pair._replace(valid=piece_pair.valid & piece_valid)
+    is_cone = layout.is_cone[taxel_of_piece]
+    at = (pair_of_piece, ray_of_piece)
+    area, integral, depth = calc_footprint_hits(piece_pair, centres_x[at], centres_y[at], pair_halves[at], is_cone)
+    depth = jax.lax.stop_gradient(depth)
+    covered = jax.lax.stop_gradient(area > AREA_FLOOR)
+    # Segments: (taxel, ray), flattened; pieces come sorted by pair, not by segment.
+    ray_of_segment = taxel_of_piece * num_rays + ray_of_piece
+    segments = {"segment_ids": ray_of_segment, "num_segments": num_taxels * num_rays}
+    nearest_depth = jax.ops.segment_min(jnp.where(covered, depth, jnp.inf), **segments).reshape(num_taxels, num_rays)
+    limit = _sheet_limit(nearest_depth, halves, layout.is_cone[:, None]).reshape(-1)
+    nearest = (area > 0.0) & (depth <= limit[ray_of_segment])
+    integrals = jax.ops.segment_sum(jnp.where(nearest, integral, 0.0), **segments).reshape(num_taxels, num_rays)
+    areas = jax.ops.segment_sum(jnp.where(nearest, area, 0.0), **segments).reshape(num_taxels, num_rays)
+    pressures, coverage = _aggregate(integrals, areas, weights)
+    did_overflow = (needed > capacity.pairs) | (pieces_needed > capacity.pieces)
+    return TaxelReadings(pressures, coverage, did_overflow, jnp.stack([needed, pieces_needed]))
 
 
 _readings = eqx.filter_jit(calc_taxel_pressures)
