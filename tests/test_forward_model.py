@@ -167,20 +167,28 @@ def _demo_truth():
     return material_prony(document)
 
 
-def test_demo_log_is_unchanged(tmp_path):
-    """The demo's (smoke) log through the new path: the columns recorded before."""
-    from hydrotact.cli.demo import SMOKE_PRESSES, make_demo_trajectory
+def simulate_regression_log(name):
+    """One of the two logs of `tests/data/regression_logs.npz`, simulated now
+    (`tests/data/record_regression_logs.py` records them with this function)."""
+    if name == "demo":
+        from hydrotact.cli.demo import SMOKE_PRESSES, make_demo_trajectory
 
-    waypoints = np.array([[float(f"{value:.9g}") for value in row] for row in make_demo_trajectory(SMOKE_PRESSES)])
-    trajectory = make_trajectory(waypoints[:, 0], waypoints[:, 1:4])
-    barometer = BarometerSettings(seed=1, noise_rms=0.5, gain_spread=0.05, offset_spread=30.0, force_noise=0.005)
-    log, _ = simulate_log("pad5x5", "cylinder:d=2mm", trajectory, _demo_truth(), num_rays=16, barometer=barometer, cache=False)
-    _assert_same_log(log, "demo")
+        waypoints = np.array([[float(f"{value:.9g}") for value in row] for row in make_demo_trajectory(SMOKE_PRESSES)])
+        trajectory = make_trajectory(waypoints[:, 0], waypoints[:, 1:4])
+        barometer = BarometerSettings(seed=1, noise_rms=0.5, gain_spread=0.05, offset_spread=30.0, force_noise=0.005)
+        log, _ = simulate_log("pad5x5", "cylinder:d=2mm", trajectory, _demo_truth(), num_rays=16, barometer=barometer, cache=False)
+        return log
+    trajectory = read_trajectory(DATA / "sphere_traj.csv")
+    log, _ = simulate_log("sphere8", make_sphere_probe(3e-3), trajectory, _demo_truth(), num_rays=24, cache=False)
+    return log
+
+
+def test_demo_log_is_unchanged():
+    """The demo's (smoke) log: the columns recorded."""
+    _assert_same_log(simulate_regression_log("demo"), "demo")
 
 
 def test_sphere8_log_is_unchanged():
     """A tilted Ø6 mm sphere pressed off-axis into sphere8 and slid (elastomer
-    pressures, viscoelastic): the columns recorded before."""
-    trajectory = read_trajectory(DATA / "sphere_traj.csv")
-    log, _ = simulate_log("sphere8", make_sphere_probe(3e-3), trajectory, _demo_truth(), num_rays=24, cache=False)
-    _assert_same_log(log, "sphere")
+    pressures, viscoelastic): the columns recorded."""
+    _assert_same_log(simulate_regression_log("sphere"), "sphere")
