@@ -118,8 +118,8 @@ def _triangle_rows(triangles, lo, hi):
 def _boxes_meet(tet, triangle):
     """Whether the boxes of tets and triangles overlap (`tet[k]` row k of `_tet_columns`,
     `triangle[k]` row k of `_triangle_rows`' transpose, or a `_Columns` view; each row
-    shaped to broadcast against the
-    other's: (S, 1) against (1, T) for every tet against every triangle)."""
+    shaped to broadcast against the other's: (S, 1) against (1, T) for every tet
+    against every triangle)."""
     meet = None
     for axis in range(3):
         overlap = (tet[TET_LO + axis] <= triangle[TRI_HI + axis]) & (triangle[TRI_LO + axis] <= tet[TET_HI + axis])
