@@ -304,19 +304,26 @@ def calc_soft_rigid_surface(
         pair_tets = near_rows[:, :TET_CLIP_ROWS][i[chosen]].T
         pair_triangles = tri_rows[:, :TRI_CLIP_ROWS][j[chosen]].T
         search_slots = num_cluster_slots * cluster_size
-        needed = jnp.array([jnp.maximum(num_near, -(-num_hit * cluster_size // CLUSTER_SEARCH)), num_tris, num_candidates, num_polygons])
-        overflow = (num_hit * cluster_size > search_slots) | (num_near > capacity.tets) | (num_tris > capacity.others) | (num_candidates > capacity.pairs) | (num_polygons > capacity.polygons)
+        needed = jnp.array(
+            [jnp.maximum(num_near, -(-num_hit * cluster_size // CLUSTER_SEARCH)), num_tris, num_candidates, num_polygons]
+        )
+        overflow = (
+            (num_hit * cluster_size > search_slots)
+            | (num_near > capacity.tets)
+            | (num_tris > capacity.others)
+            | (num_candidates > capacity.pairs)
+            | (num_polygons > capacity.polygons)
+        )
 
     num_polygons_slots = tet_index.shape[0]
     normals = pair_triangles[TRI_NORMAL : TRI_NORMAL + 3]  # (3, P)
     corners = jnp.transpose(pair_triangles[TRI_VERTICES : TRI_VERTICES + 9].reshape(3, 3, num_polygons_slots), (1, 0, 2))  # (3 coordinates, 3 corners, P)
-    keep = is_normal_along_gradient(normals, pair_tets[TET_PRESSURE + 1 : TET_PRESSURE + 4], axis=0)
+    pair_gradients = pair_tets[TET_PRESSURE + 1 : TET_PRESSURE + 4]
+    keep = is_normal_along_gradient(normals, pair_gradients, axis=0)
     face_normals, face_offsets, tie_drop = _resolve_face_ties(pair_tets, pair_triangles)
     vertices, counts = clip_polygon_by_tet_faces_columns(corners, jnp.full(tri_index.shape, 3), face_normals, face_offsets)
-    used = jnp.arange(vertices.shape[1])[:, None] < counts[None]
-    pair_gradients = pair_tets[TET_PRESSURE + 1 : TET_PRESSURE + 4]
     pressures = pair_tets[TET_PRESSURE][None] + jnp.sum(vertices * pair_gradients[:, None], axis=0)
-    pressures = jnp.where(used, pressures, 0.0)
+    pressures = jnp.where(jnp.arange(vertices.shape[1])[:, None] < counts[None], pressures, 0.0)
     area, integral, first_moment, pressure_moment = calc_polygon_integrals_columns(vertices, counts, pressures, normals)
     vertices, pressures = to_polygon_rows(vertices, pressures, POLYGON_CAPACITY)
     polygon = (vertices, pressures, counts, area, integral, first_moment.T, pressure_moment.T)
