@@ -25,15 +25,27 @@ demo: $(VENV)/.installed
 # Lint first (ruff, configured in pyproject.toml); a lint error fails the run before any
 # test. Then each test file runs in a fresh process: over one long session XLA's CPU
 # compiler crashed (SIGSEGV while compiling, after ~200 tests of JAX, VTK rendering and
-# Drake in one process; the same test passes alone). pytest exits 5 when it collected no tests:
-# that is a failure here, like any non-zero status, and any failing file fails the run.
+# Drake in one process; the same test passes alone). A test process keeps about one core
+# busy (XLA compiles on one thread), so TEST_JOBS files run at once (xargs -P); each
+# file's output is printed whole when it ends, longest files first so the run ends
+# together. pytest exits 5 when it collected no tests: that is a failure here, like any
+# non-zero status, and any failing file fails the run (and is named at the end).
+TEST_JOBS ?= 2
+TEST_LOGS := .pytest-logs
+TEST_FILES := tests/test_contact.py tests/test_taxel.py tests/test_forward_model.py tests/test_notebooks_and_experiments.py \
+	$(filter-out tests/test_contact.py tests/test_taxel.py tests/test_forward_model.py tests/test_notebooks_and_experiments.py,$(sort $(wildcard tests/test_*.py)))
+
 test: $(VENV)/.installed-test
 	$(BIN)/ruff check .
-	@status=0; for file in tests/test_*.py; do \
-	    echo "== $$file"; $(BIN)/python -m pytest $$file || status=1; \
-	done; \
-	if [ $$status -ne 0 ]; then echo "make test: some test files failed (see above)"; fi; \
-	exit $$status
+	@rm -rf $(TEST_LOGS) && mkdir -p $(TEST_LOGS)
+	@printf '%s\n' $(TEST_FILES) | xargs -P $(TEST_JOBS) -I FILE sh -c '\
+	    log=$(TEST_LOGS)/$$(basename FILE .py).log; echo "== FILE started"; \
+	    $(BIN)/python -m pytest FILE > $$log 2>&1; status=$$?; \
+	    { echo "== FILE (exit $$status)"; cat $$log; } | cat; \
+	    [ $$status -eq 0 ] || touch $$log.failed; exit 0'
+	@failed=$$(ls $(TEST_LOGS) | sed -n "s/\.log\.failed$$//p"); \
+	if [ -n "$$failed" ]; then echo "make test: these test files failed (see above):" $$failed; exit 1; fi; \
+	echo "make test: every test file passed"
 
 clean:
-	rm -rf $(VENV) out .pytest_cache
+	rm -rf $(VENV) out .pytest_cache .pytest-logs

@@ -115,6 +115,64 @@ def test_shared_edge_is_watertight():
         assert bool(intersect_ray_triangle(origin, UP, *lower)[0]) or bool(intersect_ray_triangle(origin, UP, *upper)[0])
 
 
+@pytest.mark.parametrize("is_cone", [False, True], ids=["disk", "cone"])
+def test_footprints_shrunk_to_a_point_agree_with_moller_trumbore(is_cone, rng):
+    """The footprint clip's inside test is the Moller-Trumbore test written as edge
+    functions of the ray plane: a footprint 1e-7 of the triangles' size covers all of
+    its square exactly where intersect_ray_triangle hits (away from the edges by more
+    than the footprint), none where it misses, and sees the same distance along the
+    ray and the same (barycentric, perspective-correct on a cone) pressure."""
+    from hydrotact.taxel._footprint import calc_footprint_hits, calc_pair_geometry
+    from hydrotact.taxel._patterns import calc_perpendicular_frame
+
+    position = jnp.asarray(rng.normal(size=3) * 1e-3)
+    axis = jnp.asarray(rng.normal(size=3))
+    axis = axis / jnp.linalg.norm(axis)
+    u, v = calc_perpendicular_frame(axis)
+    frame = np.stack([np.asarray(u), np.asarray(v), np.asarray(axis)])  # rows: the taxel frame in S
+    num_triangles, num_rays, size = 120, 150, 1e-3
+    local = rng.uniform(-size, size, size=(num_triangles, 3, 3))
+    local[..., 2] = rng.uniform(0.5 * size, 2 * size, size=(num_triangles, 3))
+    corners_S = position[None, None] + np.einsum("tck,kl->tcl", local, frame)
+    pressures = rng.uniform(1e3, 1e4, size=(num_triangles, 3))
+    # Rays: points of the ray plane (disk: offsets in mm; cone: tangents of the angle).
+    scale = 1.0 if is_cone else size
+    xy = rng.uniform(-scale, scale, size=(num_rays, 2))
+    pair = calc_pair_geometry(
+        jnp.asarray(position)[:, None, None],
+        u[:, None, None],
+        v[:, None, None],
+        axis[:, None, None],
+        jnp.asarray(corners_S.transpose(1, 2, 0))[..., None],
+        jnp.asarray(pressures.T)[..., None],
+        jnp.asarray(is_cone),
+        jnp.ones((num_triangles, 1), bool),
+    )
+    half = jnp.asarray(1e-7 * scale)
+    area, integral, depth = (np.asarray(a) for a in calc_footprint_hits(pair, jnp.asarray(xy[:, 0])[None], jnp.asarray(xy[:, 1])[None], half, jnp.asarray(is_cone)))
+    # The same rays, cast: from the apex along (X, Y, 1) on a cone, along the axis from (X, Y) on a disk.
+    offsets = xy @ frame[:2]
+    if is_cone:
+        directions = offsets + frame[2][None]
+        directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+        origins = np.broadcast_to(np.asarray(position), (num_rays, 3))
+    else:
+        directions = np.broadcast_to(frame[2], (num_rays, 3))
+        origins = np.asarray(position)[None] + offsets
+    columns = [jnp.asarray(c.T)[:, None, :] for c in (origins, directions)] + [jnp.asarray(corners_S[:, j].T)[..., None] for j in range(3)]
+    hit, t, bu, bv = (np.asarray(a) for a in intersect_ray_triangle(*columns))
+    weights = np.stack([1.0 - bu - bv, bu, bv])
+    margin = weights.min(axis=0) / np.maximum(np.abs(weights).max(axis=0), 1.0)
+    inside, outside = hit & (margin > 1e-4), margin < -1e-4
+    assert inside.sum() > 500 and outside.sum() > 500, (inside.sum(), outside.sum())
+    assert np.all(~hit[outside])
+    np.testing.assert_allclose(area[inside], 1.0, rtol=1e-6)
+    np.testing.assert_array_equal(area[outside], 0.0)
+    np.testing.assert_allclose(depth[inside], t[inside], rtol=1e-6)
+    expected = np.einsum("jtr,jt->tr", weights, pressures.T)
+    np.testing.assert_allclose(integral[inside] / area[inside], expected[inside], rtol=1e-6)
+
+
 # --- receptive fields ----------------------------------------------------------------
 
 

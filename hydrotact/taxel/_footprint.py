@@ -39,6 +39,7 @@ import jax
 import jax.numpy as jnp
 
 from .._math import safe_div, safe_sqrt
+from ._raycast import _cross, _dot
 
 PARALLEL_TOLERANCE = 1e-12  # as in intersect_ray_triangle: rays (nearly) parallel to the plane miss
 FRONT_TOLERANCE = 1e-12  # a disk's corner must be this far in front of the taxel (relative to its distance)
@@ -48,14 +49,6 @@ FRONT_TOLERANCE = 1e-12  # a disk's corner must be this far in front of the taxe
 # Contact-surface triangles are far smaller than the 45-degree span from a field's
 # rim (< 90 degrees) out to there, so no visible triangle is lost in practice.
 CONE_FRONT_COSINE = 0.08715574274765817
-
-
-def _dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def _cross(a, b):
-    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 
 
 class PairGeometry(NamedTuple):
