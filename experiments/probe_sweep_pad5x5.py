@@ -6,7 +6,11 @@ paper's stage resolution), and along the diagonal from cell b00 to cell b44 in s
 the same length. At each position the probe presses down until the reference force
 (the axial force on the probe, -F_z on the sensor) reaches 0.35 N: the depth is solved
 by Newton's method on the differentiable contact force (optimistix), not by stepping.
-All 25 taxels are recorded at that depth.
+All 25 taxels are recorded at that depth, with the library's default 64 rays per
+taxel (footprint rays: each integrates the pressure over its own square of the
+receptive field, so the curves are smooth without more rays), and again with 1024
+rays at every 16th position, the converged reference the 64-ray curves are measured
+against.
 
 Outputs (in --output, default experiments/results/):
 - `probe_sweep_pad5x5.png`: normalised responses of the three innermost cells along
@@ -14,16 +18,18 @@ Outputs (in --output, default experiments/results/):
 - `probe_sweep_pad5x5.json`: per cell, the peak position (expected at the cell's
   centre), the full width at half maximum, the cross-talk ratio at the neighbouring
   cell's centre, and the roughness (max |second difference| of the normalised curve,
-  which shows ridge-and-dent artefacts), plus the settings and timings;
+  which shows ridge-and-dent artefacts), the largest difference from the 1024-ray
+  reference (as a share of the cell's peak), plus the settings and timings;
 - `probe_sweep_pad5x5.npz`: the raw traces.
 
 Each sweep runs in chunks; finished chunks are kept in `.probe_sweep_pad5x5.partial.npz`
 so an interrupted run resumes. `--smoke` runs a few coarse positions (for the tests).
 
-Run: `.venv/bin/python experiments/probe_sweep_pad5x5.py [--rays 256] [--smoke]`.
+Run: `.venv/bin/python experiments/probe_sweep_pad5x5.py [--rays 64] [--reference-rays 1024] [--smoke]`.
 """
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -60,14 +66,15 @@ SWEEPS = {
 }
 
 
-def sweep_positions(name: str, step: float, smoke: bool):
+def sweep_positions(name: str, step: float, smoke: bool, every: int = 1):
     """(s, xy): the coordinate along the sweep (0 at the centre cell) and the probe's
-    (x, y), from the first cell's centre to the last's."""
+    (x, y), from the first cell's centre to the last's (every `every`-th of them)."""
     half = 2 * PITCH * (np.sqrt(2.0) if name == "diagonal" else 1.0)
     if smoke:
         s = np.linspace(-1.2 * PITCH, 1.2 * PITCH, 7) * (np.sqrt(2.0) if name == "diagonal" else 1.0)
     else:
         s = np.arange(-half, half + 0.5 * step, step)
+    s = s[::every]
     return s, s[:, None] * SWEEPS[name]["direction"][None]
 
 
@@ -108,11 +115,13 @@ def _responses(model, probe, xys, depths, capacity):
     return jax.vmap(one)(xys, depths)
 
 
-def run_sweep(name, model, probe, capacity, modulus, step, smoke, chunk, partial, progress=True):
-    """Solve depths and record taxels along one sweep, chunk by chunk, resumably."""
+def run_sweep(name, model, probe, capacity, modulus, step, smoke, chunk, partial, progress=True, every=1, depths=None):
+    """Solve depths and record taxels along one sweep (every `every`-th position),
+    chunk by chunk, resumably; with `depths` (one per position recorded), record the
+    taxels at those depths instead of solving."""
     from tqdm.auto import tqdm
 
-    s, xys = sweep_positions(name, step, smoke)
+    s, xys = sweep_positions(name, step, smoke, every)
     key = digest(name, model.num_rays, modulus, np.ascontiguousarray(xys).tobytes(), capacity.contact, capacity.taxel_pairs)
     done = {}
     if partial.is_file():
@@ -124,12 +133,17 @@ def run_sweep(name, model, probe, capacity, modulus, step, smoke, chunk, partial
             done = {}
     num_done = len(done.get("depth", []))
     chunk = min(chunk, len(s))
-    with tqdm(total=len(s), initial=num_done, unit="position", desc=f"{name} sweep", disable=not progress) as bar:
+    label = f"{name} sweep, {model.num_rays} rays"
+    with tqdm(total=len(s), initial=num_done, unit="position", desc=label, disable=not progress) as bar:
         for start in range(num_done, len(s), chunk):
             index = np.minimum(np.arange(start, start + chunk), len(s) - 1)
             xy = jnp.asarray(xys[index])
             while True:  # grow the buffers if the contact at the solved depths needs it
-                depth, force, overflow, converged = solve_depths(model, probe, capacity, jnp.asarray(modulus), xy, jnp.asarray(0.45e-3))
+                if depths is None:
+                    depth, force, overflow, converged = solve_depths(model, probe, capacity, jnp.asarray(modulus), xy, jnp.asarray(0.45e-3))
+                else:
+                    depth, overflow = jnp.asarray(depths[index]), jnp.zeros(len(index), bool)
+                    force, converged = jnp.full(len(index), jnp.nan), overflow
                 unit = _responses(model, probe, xy, depth, capacity)
                 if not bool(jnp.any(overflow | unit.did_overflow)):
                     break
@@ -169,15 +183,28 @@ def half_maximum_width(s, curve):
     return float(crossing(right - 1, right) - crossing(left, left + 1))
 
 
-def cell_metrics(s, taxels, cells, along):
-    """Peak, width, cross-talk and roughness of each cell's normalised curve."""
+def refined_peak(s, curve):
+    """The peak's position: the vertex of the parabola through the largest sample and
+    its two neighbours (the sample itself at either end of the sweep)."""
+    k = int(np.argmax(curve))
+    if k == 0 or k == len(curve) - 1:
+        return float(s[k])
+    left, middle, right = curve[k - 1], curve[k], curve[k + 1]
+    bend = left - 2 * middle + right
+    shift = 0.5 * (left - right) / bend if bend < 0 else 0.0
+    return float(s[k] + shift * (s[k + 1] - s[k]))
+
+
+def cell_metrics(s, taxels, cells, along, reference=None):
+    """Peak, width, cross-talk and roughness of each cell's normalised curve; with
+    `reference` (s, taxels) at more rays, the largest difference from it."""
     metrics = {}
     centres = {cell: (i - 1) * along for i, cell in enumerate(cells)}
     for cell, index in cells.items():
         curve = taxels[:, index]
         peak_value = float(curve.max())
         normalised = curve / peak_value if peak_value > 0 else curve
-        peak_at = float(s[int(np.argmax(curve))])
+        peak_at = refined_peak(s, curve)
         neighbours = [c for c in cells if c != cell and abs(centres[c] - centres[cell]) < 1.5 * along]
         crosstalk = {c: float(np.interp(centres[c], s, normalised)) for c in neighbours}
         roughness = float(np.max(np.abs(np.diff(normalised, 2)))) if len(s) > 2 else float("nan")
@@ -191,10 +218,15 @@ def cell_metrics(s, taxels, cells, along):
             "crosstalk_at_neighbour_centre": crosstalk,
             "roughness_max_abs_second_difference": roughness,
         }
+        if reference is not None:
+            reference_s, reference_taxels = reference
+            at = np.searchsorted(s, reference_s - 1e-12)  # the reference positions are sweep positions
+            difference = np.max(np.abs(curve[at] - reference_taxels[:, index])) / max(float(reference_taxels[:, index].max()), 1e-300)
+            metrics[cell]["max_difference_from_reference_of_peak"] = float(difference)
     return metrics
 
 
-def plot(results, path, title):
+def plot(results, path, title, references=None):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -205,8 +237,11 @@ def plot(results, path, title):
         s_mm = 1e3 * result["s"]
         for cell, index in SWEEPS[name]["cells"].items():
             curve = result["taxels"][:, index]
-            axes[0, column].plot(s_mm, curve / max(curve.max(), 1e-300), lw=1.2, label=cell)
-        axes[0, column].set_title(f"{name} sweep")
+            line = axes[0, column].plot(s_mm, curve / max(curve.max(), 1e-300), lw=1.2, label=cell)[0]
+            if references is not None:
+                reference = references[name]
+                axes[0, column].plot(1e3 * reference["s"], reference["taxels"][:, index] / max(curve.max(), 1e-300), "o", ms=2.5, mfc="none", color=line.get_color())
+        axes[0, column].set_title(f"{name} sweep" + ("" if references is None else f" (circles: {references['rays']} rays)"))
         axes[0, column].set_ylabel("normalised response")
         axes[0, column].legend(fontsize=8)
         axes[0, column].grid(alpha=0.3)
@@ -224,26 +259,34 @@ def plot(results, path, title):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--smoke", action="store_true", help="a few coarse positions and 16 rays (for the tests)")
-    parser.add_argument("--rays", type=int, default=256, help="rays per taxel (default 256)")
+    parser.add_argument("--rays", type=int, default=64, help="rays per taxel (default 64, the library's)")
+    parser.add_argument("--reference-rays", type=int, default=1024, help="rays per taxel of the converged reference (default 1024)")
+    parser.add_argument("--reference-every", type=int, default=16, help="the reference at every this many positions (default 16)")
     parser.add_argument("--step", type=float, default=0.0125e-3, help="step along each sweep in metres (default 0.0125 mm)")
     parser.add_argument("--modulus", type=float, default=1e6, help="hydroelastic modulus in Pa (default 1e6)")
     parser.add_argument("--chunk", type=int, default=32, help="positions per jitted call")
     parser.add_argument("--output", type=Path, default=Path(__file__).parent / "results")
     args = parser.parse_args(argv)
-    rays = 16 if args.smoke and args.rays == 256 else args.rays
+    rays = 16 if args.smoke and args.rays == 64 else args.rays
+    reference_rays = 64 if args.smoke and args.reference_rays == 1024 else args.reference_rays
+    every = 2 if args.smoke and args.reference_every == 16 else args.reference_every
     started = time.perf_counter()
     model = make_sensor_model("pad5x5", num_rays=rays)
+    reference_model = dataclasses.replace(model, num_rays=reference_rays)  # the same field, more rays
     probe = make_cylinder_probe(2e-3)
     # Buffers that hold the deepest contact of the sweeps (found once, then fixed).
     probes = jax.vmap(make_pose)(jnp.array([[x, y, TOP - 0.9e-3] for x in (-4.4e-3, 0.0, 1.1e-3) for y in (-4.4e-3, 0.0, 0.55e-3)]))
     _, contact_capacity = compute_contact_surface(model.field, probe, probes, clusters=model.clusters)
     capacity = SimCapacity.of(contact_capacity, TaxelCapacity(1 << 13))
     args.output.mkdir(parents=True, exist_ok=True)
-    results = {}
+    results, references = {}, {"rays": reference_rays}
     for name in SWEEPS:
-        partial = args.output / f".{NAME}.{name.replace(' ', '_')}.partial.npz"
-        s, xys, recorded = run_sweep(name, model, probe, capacity, args.modulus, args.step, args.smoke, args.chunk, partial)
-        results[name] = {"s": s, "xy": xys, **recorded}
+        for sweep_model, stride, store in ((model, 1, results), (reference_model, every, references)):
+            partial = args.output / f".{NAME}.{name.replace(' ', '_')}.{sweep_model.num_rays}.partial.npz"
+            # the reference at the depths already solved (the contact does not depend on the rays)
+            depths = None if stride == 1 else results[name]["depth"][::stride]
+            s, xys, recorded = run_sweep(name, sweep_model, probe, capacity, args.modulus, args.step, args.smoke, args.chunk, partial, every=stride, depths=depths)
+            store[name] = {"s": s, "xy": xys, **recorded}
     report = {
         "experiment": "probe sweep over pad5x5 (hydroelastic tactile paper, Fig. 6 procedure)",
         "smoke": args.smoke,
@@ -251,6 +294,8 @@ def main(argv=None):
         "target_force_N": TARGET_FORCE,
         "modulus_Pa": args.modulus,
         "rays_per_taxel": rays,
+        "reference_rays_per_taxel": reference_rays,
+        "reference_every": every,
         "step_mm": 1e3 * args.step,
         "seconds": time.perf_counter() - started,
         "sweeps": {},
@@ -262,15 +307,16 @@ def main(argv=None):
             "all_converged": bool(np.all(result["converged"])),
             "max_force_error_N": float(np.max(np.abs(result["force"] - TARGET_FORCE))),
             "depth_mm": [1e3 * float(result["depth"].min()), 1e3 * float(result["depth"].max())],
-            "cells": cell_metrics(result["s"], result["taxels"], SWEEPS[name]["cells"], along),
+            "cells": cell_metrics(result["s"], result["taxels"], SWEEPS[name]["cells"], along, (references[name]["s"], references[name]["taxels"])),
         }
     stem = args.output / NAME
     write_text_atomic(stem.with_suffix(".json"), json.dumps(report, indent=2) + "\n")
     with atomic_path(stem.with_suffix(".npz"), suffix=".npz") as tmp:
         np.savez_compressed(tmp, **{f"{name.replace(' ', '_')}/{k}": v for name, r in results.items() for k, v in r.items()})
-    plot(results, stem.with_suffix(".png"), f"pad5x5, 2 mm cylinder at {TARGET_FORCE} N, {rays} rays per taxel")
+    plot(results, stem.with_suffix(".png"), f"pad5x5, 2 mm cylinder at {TARGET_FORCE} N, {rays} rays per taxel", references)
     for name in SWEEPS:
-        (args.output / f".{NAME}.{name.replace(' ', '_')}.partial.npz").unlink(missing_ok=True)
+        for sweep_rays in (rays, reference_rays):
+            (args.output / f".{NAME}.{name.replace(' ', '_')}.{sweep_rays}.partial.npz").unlink(missing_ok=True)
     print(f"results: {stem.with_suffix('.json')}, {stem.with_suffix('.png')}, {stem.with_suffix('.npz')}")
     return report
 

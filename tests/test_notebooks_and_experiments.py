@@ -41,3 +41,5 @@ def test_probe_sweep_smoke(tmp_path):
         centre = sweep["cells"]["b22"]
         assert centre["peak_within_0.1mm"], (name, centre)
         assert 1.0 < centre["fwhm_mm"] < 4.0, (name, centre)
+        # 16 rays against 64 at the positions both ran (footprint rays: 5 % of the peak at most)
+        assert 0.0 < centre["max_difference_from_reference_of_peak"] < 0.08, (name, centre)
