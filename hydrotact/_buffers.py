@@ -127,7 +127,9 @@ class AbstractCapacity(eqx.Module):
         needed = np.asarray(needed, dtype=np.int64).reshape(-1, len(names))
         if not needed.shape[0]:
             return self
-        fitted = [_fit(0, need) for need in np.max(needed, axis=0).tolist()]
+        # At least the smallest size (8): a batch with nothing in a buffer (no contact)
+        # must not leave it empty for the next batch, which would index into it.
+        fitted = [_fit(0, max(need, 1)) for need in np.max(needed, axis=0).tolist()]
         sizes = [fit if size > SHRINK_BELOW * fit else size for size, fit in zip(self.sizes, fitted)]
         return self if tuple(sizes) == self.sizes else type(self)(**dict(zip(names, sizes)))
 

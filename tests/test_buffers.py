@@ -103,6 +103,10 @@ def test_capacity_shrinks_to_a_batch_far_below_it():
     assert Capacity(4096, 512, 8192, 2048).fitted_to([[100, 20, 900, 300], [90, 30, 2000, 400]]) == Capacity(104, 30, 8192, 416)  # pairs: 8192 is not more than 4 x 2048
     assert _Pair(40, 208).fitted_to([12, 60]) == _Pair(40, 208)  # within SHRINK_BELOW of the needs: kept
     assert _Pair(40, 208).fitted_to(np.zeros((0, 2))) == _Pair(40, 208)
+    # A batch that needed nothing (no contact) keeps every used buffer at 8 or more, so
+    # the next batch, which may touch, still has room to index into; unused (0) stay 0.
+    assert Capacity(4096, 512, 8192, 2048).fitted_to([0, 0, 0, 0]) == Capacity(8, 8, 8, 8)
+    assert Capacity(512, 0, 0, 1024).fitted_to([0, 0, 0, 0]) == Capacity(8, 0, 0, 8)
 
     def compute(needs):
         def run(capacity):
