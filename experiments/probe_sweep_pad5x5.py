@@ -22,8 +22,8 @@ Outputs (in --output, default experiments/results/):
   reference (as a share of the cell's peak), plus the settings and timings;
 - `probe_sweep_pad5x5.npz`: the raw traces.
 
-Each sweep runs in chunks; finished chunks are kept in `.probe_sweep_pad5x5.partial.npz`
-so an interrupted run resumes. `--smoke` runs a few coarse positions (for the tests).
+Each sweep and its reference run in chunks; finished chunks are kept in hidden
+`.probe_sweep_pad5x5.*.partial.npz` files, so an interrupted run resumes. `--smoke` runs a few coarse positions (for the tests).
 
 Run: `.venv/bin/python experiments/probe_sweep_pad5x5.py [--rays 64] [--reference-rays 1024] [--smoke]`.
 """
@@ -281,10 +281,10 @@ def main(argv=None):
     args.output.mkdir(parents=True, exist_ok=True)
     results, references = {}, {"rays": reference_rays}
     for name in SWEEPS:
-        for sweep_model, stride, store in ((model, 1, results), (reference_model, every, references)):
-            partial = args.output / f".{NAME}.{name.replace(' ', '_')}.{sweep_model.num_rays}.partial.npz"
+        for part, sweep_model, stride, store in (("sweep", model, 1, results), ("reference", reference_model, every, references)):
+            partial = args.output / f".{NAME}.{name.replace(' ', '_')}.{part}.partial.npz"
             # the reference at the depths already solved (the contact does not depend on the rays)
-            depths = None if stride == 1 else results[name]["depth"][::stride]
+            depths = None if part == "sweep" else results[name]["depth"][::stride]
             s, xys, recorded = run_sweep(name, sweep_model, probe, capacity, args.modulus, args.step, args.smoke, args.chunk, partial, every=stride, depths=depths)
             store[name] = {"s": s, "xy": xys, **recorded}
     report = {
@@ -315,8 +315,8 @@ def main(argv=None):
         np.savez_compressed(tmp, **{f"{name.replace(' ', '_')}/{k}": v for name, r in results.items() for k, v in r.items()})
     plot(results, stem.with_suffix(".png"), f"pad5x5, 2 mm cylinder at {TARGET_FORCE} N, {rays} rays per taxel", references)
     for name in SWEEPS:
-        for sweep_rays in (rays, reference_rays):
-            (args.output / f".{NAME}.{name.replace(' ', '_')}.{sweep_rays}.partial.npz").unlink(missing_ok=True)
+        for part in ("sweep", "reference"):
+            (args.output / f".{NAME}.{name.replace(' ', '_')}.{part}.partial.npz").unlink(missing_ok=True)
     print(f"results: {stem.with_suffix('.json')}, {stem.with_suffix('.png')}, {stem.with_suffix('.npz')}")
     return report
 

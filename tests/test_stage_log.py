@@ -103,3 +103,37 @@ def test_the_log_reads_back_and_bad_sessions_are_refused(stage_log, tmp_path):
         simulate_stage_log("sphere8", PROBE, MATERIAL, StageSession(silent=("b9",)))
     with pytest.raises(HydrotactError, match="site 1 at \\(30, 0\\) mm is not above the skin"):
         simulate_stage_log("sphere8", PROBE, MATERIAL, StageSession(sites=((30e-3, 0.0),)))
+
+
+def test_presses_and_sites_are_found_as_the_stage_made_them(stage_log):
+    from hydrotact.sysid import find_log_presses
+
+    log, truth = stage_log
+    presses = find_log_presses(log)
+    assert presses.num_presses == len(truth["presses"]) and presses.num_sites == len(truth["sites"])
+    np.testing.assert_allclose(presses.positions, truth["sites"], atol=1e-12)
+    for k, press in enumerate(truth["presses"]):
+        assert presses.sites[k] == press["site"]
+        first, last = log.times[presses.starts[k]], log.times[presses.ends[k] - 1]
+        # from the last sample at rest before the press to the first one after it
+        assert press["start_s"] - 0.25 < first <= press["start_s"] + 0.25 and press["end_s"] - 0.25 <= last < press["end_s"] + 0.25, (k, first, last, press)
+        travel = log.columns["indentation"][presses.starts[k] : presses.ends[k]]
+        assert travel.max() == pytest.approx(press["onset_travel_m"] + press["depth_m"], abs=1e-12)
+
+
+def test_presses_without_positions_and_a_stage_that_moves_mid_press():
+    from hydrotact.data import BarometerLog
+    from hydrotact.sysid import find_log_presses
+
+    t = np.arange(200) * 0.05
+    travel = np.where((t % 5.0 > 1.0) & (t % 5.0 < 3.0), 1e-3, 0.0)
+    log = BarometerLog(metadata={"channels": ["b0"]}, columns={"time": t, "b0": t, "indentation": travel})
+    presses = find_log_presses(log)
+    assert presses.num_presses == 2 and presses.num_sites == 2 and presses.positions.shape == (2, 0)
+    moving = dict(log.columns, stage_x=np.where(t > 7.0, 1e-3, 0.0))
+    with pytest.raises(HydrotactError, match=r"column 'stage_x', row 142: the stage moves during a press \(from row 122\)"):
+        find_log_presses(BarometerLog(metadata=log.metadata, columns=moving), source="log.csv")
+    with pytest.raises(HydrotactError, match="never moves above its rest level"):
+        find_log_presses(BarometerLog(metadata=log.metadata, columns=dict(log.columns, indentation=np.zeros(200))))
+    with pytest.raises(HydrotactError, match="--press-threshold: must be between 0 and 1"):
+        find_log_presses(log, threshold=5.0)

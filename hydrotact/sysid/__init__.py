@@ -28,6 +28,18 @@ from ._fit_logs import read_logs as read_logs
 from ._model import ParameterLayout as ParameterLayout
 from ._model import calc_predictions as calc_predictions
 from ._model import calc_residuals as calc_residuals
+from ._presses import (
+    Presses as Presses,
+)
+from ._presses import (
+    find_log_presses as find_log_presses,
+)
+from ._presses import (
+    find_presses as find_presses,
+)
+from ._presses import (
+    group_sites as group_sites,
+)
 from ._problem import FitProblem as FitProblem
 from ._problem import LogArrays as LogArrays
 from ._problem import make_fit_problem as make_fit_problem
