@@ -108,6 +108,10 @@ def clip_polygon_columns(vertices, count, normal, offset):
     **Returns:** (list of n + 1 arrays (3, P), count (P,)).
     """
     n = len(vertices)
+    # Keep the reduction over the 3-long axis: it is a fusion barrier. Written as
+    # v[0] * n[0] + v[1] * n[1] + v[2] * n[2], XLA's CPU fusion recomputes each clip
+    # stage's vertices inside every select of the next, and four chained stages made
+    # the contact 100x slower (benchmarks/RESULTS.md, issue 12).
     distance = [jnp.sum(v * normal, axis=0) - offset for v in vertices]
     keep, crosses, crossing, starts = [], [], [], []
     emitted_before = jnp.zeros_like(count)
