@@ -32,8 +32,8 @@ demo: $(VENV)/.installed
 # non-zero status, and any failing file fails the run (and is named at the end).
 TEST_JOBS ?= 2
 TEST_LOGS := .pytest-logs
-TEST_FILES := tests/test_contact.py tests/test_taxel.py tests/test_forward_model.py tests/test_notebooks_and_experiments.py \
-	$(filter-out tests/test_contact.py tests/test_taxel.py tests/test_forward_model.py tests/test_notebooks_and_experiments.py,$(sort $(wildcard tests/test_*.py)))
+TEST_FIRST := tests/test_contact.py tests/test_taxel.py tests/test_forward_model.py tests/test_notebooks_and_experiments.py
+TEST_FILES := $(TEST_FIRST) $(filter-out $(TEST_FIRST),$(sort $(wildcard tests/test_*.py)))
 
 test: $(VENV)/.installed-test
 	$(BIN)/ruff check .
@@ -41,7 +41,7 @@ test: $(VENV)/.installed-test
 	@printf '%s\n' $(TEST_FILES) | xargs -P $(TEST_JOBS) -I FILE sh -c '\
 	    log=$(TEST_LOGS)/$$(basename FILE .py).log; echo "== FILE started"; \
 	    $(BIN)/python -m pytest FILE > $$log 2>&1; status=$$?; \
-	    { echo "== FILE (exit $$status)"; cat $$log; } | cat; \
+	    echo "== FILE (exit $$status)"; cat $$log; \
 	    [ $$status -eq 0 ] || touch $$log.failed; exit 0'
 	@failed=$$(ls $(TEST_LOGS) | sed -n "s/\.log\.failed$$//p"); \
 	if [ -n "$$failed" ]; then echo "make test: these test files failed (see above):" $$failed; exit 1; fi; \

@@ -143,7 +143,7 @@ def run_sweep(name, model, probe, capacity, modulus, step, smoke, chunk, partial
                     depth, force, overflow, converged = solve_depths(model, probe, capacity, jnp.asarray(modulus), xy, jnp.asarray(0.45e-3))
                 else:
                     depth, overflow = jnp.asarray(depths[index]), jnp.zeros(len(index), bool)
-                    force, converged = jnp.full(len(index), jnp.nan), overflow
+                    force, converged = jnp.full(len(index), jnp.nan), jnp.ones(len(index), bool)  # solved by the sweep
                 unit = _responses(model, probe, xy, depth, capacity)
                 if not bool(jnp.any(overflow | unit.did_overflow)):
                     break

@@ -129,21 +129,18 @@ def _stage_plan(session: StageSession, onsets_travel: np.ndarray, rng, rate_hz: 
     now = 0.0
     presses = []
 
-    def hold(duration, travel, site):
+    def append(travels, site):
         nonlocal now
-        count = max(1, int(np.ceil(duration * rate_hz)))
-        pieces_t.append(now + np.arange(count) / rate_hz)
-        pieces_travel.append(np.full(count, travel))
-        pieces_site.append(np.full(count, site))
-        now += count / rate_hz
+        pieces_t.append(now + np.arange(len(travels)) / rate_hz)
+        pieces_travel.append(travels)
+        pieces_site.append(np.full(len(travels), site))
+        now += len(travels) / rate_hz
+
+    def hold(duration, travel, site):
+        append(np.full(max(1, int(np.ceil(duration * rate_hz))), travel), site)
 
     def ramp(start, end, site):
-        nonlocal now
-        count = max(2, int(np.ceil(abs(end - start) / session.speed * rate_hz)))
-        pieces_t.append(now + np.arange(count) / rate_hz)
-        pieces_travel.append(np.linspace(start, end, count, endpoint=False))
-        pieces_site.append(np.full(count, site))
-        now += count / rate_hz
+        append(np.linspace(start, end, max(2, int(np.ceil(abs(end - start) / session.speed * rate_hz))), endpoint=False), site)
 
     hold(session.lead, 0.0, 0)
     num_sites = len(onsets_travel)
@@ -221,12 +218,11 @@ def simulate_stage_log(
     trajectory = make_trajectory(times, translations, source="stage session")
     log, _ = simulate_log(spec, probe, trajectory, material, num_rays=num_rays, progress=progress)
     elastic = log.channels  # elastomer pressure on the simulation clock
+    elastic[:, np.isin(channels, session.silent)] = 0.0  # dead barometers
     baseline = spec.part.ambient_pa + offset_spread * rng.standard_normal(len(channels))
     # The log's clock; the pressures are those lag_s earlier than the stage it logs.
     clock = _log_clock(session, float(times[-1]), rng)
     observed = np.column_stack([np.interp(clock - session.lag_s, times, elastic[:, c]) for c in range(len(channels))])
-    for name in session.silent:
-        observed[:, channels.index(name)] = 0.0
     rises = observed.max(axis=0)
     observed = baseline + observed + session.noise_rms * rng.standard_normal(observed.shape)
     span = clock[-1] - clock[0]
@@ -259,7 +255,7 @@ def simulate_stage_log(
         "home_offset_m": float(home_offset),
         "drift": drift,
         "baseline_pa": baseline,
-        "elastic": (times, np.where(np.isin(channels, session.silent)[None], 0.0, elastic)),
+        "elastic": (times, elastic),
         "clipped": clipped,
         "silent": tuple(session.silent),
         "overload": session.overload,

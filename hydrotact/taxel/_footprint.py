@@ -39,9 +39,8 @@ import jax
 import jax.numpy as jnp
 
 from .._math import safe_div, safe_sqrt
-from ._raycast import _cross, _dot
+from ._raycast import PARALLEL_TOLERANCE, _cross, _dot  # rays (nearly) parallel to a plane miss, as in intersect_ray_triangle
 
-PARALLEL_TOLERANCE = 1e-12  # as in intersect_ray_triangle: rays (nearly) parallel to the plane miss
 FRONT_TOLERANCE = 1e-12  # a disk's corner must be this far in front of the taxel (relative to its distance)
 # A cone's triangle counts only with every corner within acos(CONE_FRONT_COSINE) = 85
 # degrees of the axis: nearer the horizon its gnomonic projection runs off to
