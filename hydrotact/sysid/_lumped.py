@@ -127,3 +127,42 @@ def calc_press_predictions(shape: Prony, exponents, onsets, lag, coefficients, d
     prediction, with the amplitudes of a fit)."""
     bases = calc_bases(shape, exponents, calc_depths(data, onsets, lag), data)
     return jnp.einsum("ctn,cn->tc", _design(bases, data), coefficients)
+
+
+ONSET_HALF_RANGE = 0.3e-3  # m: a press's onset stays within this of its start value
+LAG_BOUND = 0.5  # s: an estimated lag stays within ±this
+
+
+class PressLayout(eqx.Module):
+    """Where the nonlinear parameters sit in x (static): log Eᵢ/E∞ (K), log τᵢ (K),
+    the exponents' unbounded coordinates (C), the onsets' (P), and the lag's (1, when
+    estimated)."""
+
+    num_terms: int = eqx.field(static=True)
+    num_channels: int = eqx.field(static=True)
+    num_presses: int = eqx.field(static=True)
+    estimate_lag: bool = eqx.field(static=True)
+
+    @property
+    def size(self) -> int:
+        return 2 * self.num_terms + self.num_channels + self.num_presses + int(self.estimate_lag)
+
+    def unpack(self, x, onset_start, lag):
+        """(shape, exponents, onsets, lag) from x."""
+        k, c, p = self.num_terms, self.num_channels, self.num_presses
+        shape = Prony(jnp.ones((), x.dtype), jnp.exp(x[:k]), jnp.exp(x[k : 2 * k]))
+        exponents = bounded(x[2 * k : 2 * k + c], *EXPONENT_RANGE)
+        onsets = onset_start + ONSET_HALF_RANGE * jnp.tanh(x[2 * k + c : 2 * k + c + p])
+        if self.estimate_lag:
+            lag = LAG_BOUND * jnp.tanh(x[-1])
+        return shape, exponents, onsets, lag
+
+
+def press_residual_fn(layout: PressLayout):
+    """x, (data, onset_start, lag) -> the flat weighted residuals (for optimistix)."""
+
+    def residuals(x, args):
+        data, onset_start, lag = args
+        return calc_press_residuals(*layout.unpack(x, onset_start, lag), data)[0].reshape(-1)
+
+    return residuals
