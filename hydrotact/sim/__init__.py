@@ -63,6 +63,7 @@ from ._simulate import (
 from ._simulate import (
     calc_unit_response as calc_unit_response,
 )
+from ._stage import FINGERTIP_SENSOR as FINGERTIP_SENSOR
 from ._stage import StageSession as StageSession
 from ._stage import find_contact_heights as find_contact_heights
 from ._stage import make_site_grid as make_site_grid

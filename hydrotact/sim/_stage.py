@@ -22,6 +22,7 @@ project does not ship.
 """
 
 import dataclasses
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -33,6 +34,11 @@ from ..visco import Prony
 from ._log import simulate_log
 from ._model import make_sensor_model
 from ._trajectory import make_trajectory
+
+
+FINGERTIP_SENSOR = Path(__file__).parent / "data" / "fingertip4.json"
+"""The stand-in's fingertip: the sphere8 elastomer with 4 barometers on risers just
+under the pressed area (a sensor JSON file; see its description)."""
 
 
 def make_site_grid(rows: int = 4, cols: int = 5, pitch: float = 1e-3, center=(0.0, 0.0)) -> np.ndarray:

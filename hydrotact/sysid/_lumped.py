@@ -2,39 +2,44 @@
 
 For a sensor nobody has modelled, each channel c of a log is
 
-    reading_c(t) = offset_c + drift_c · t̃ + Σ_s A_{c,s} · B_{c,s}(t)
+    reading_c(t) = Σ_d β_{c,d} · φ_d(t) + Σ_s Σ_j A_{c,s,j} · B_{s,j}(t)
 
-with one basis per site s,
+with a slowly varying baseline (φ_d: a constant, a line, or cubic B-splines with knots
+tens of seconds apart for a drifting sensor; per log) and, per site s and power p_j,
 
-    B_{c,s}(t) = [δ(t) > 0] · H(E / E∞, g_c · [site(t) = s])(t),
-    g_c(t) = (δ(t) / δ_ref)^{b_c},   δ(t) = (travel(t − lag) − onset_{press(t)})₊,
+    B_{s,j}(t) = [δ(t) > 0] · H(E / E∞, (δ / δ_ref)^{p_j} · [site(t) = s])(t),
+    δ(t) = (travel(t − lag) − onset_{press(t)})₊,
 
 where H is the hereditary integral (:func:`hydrotact.visco.calc_hereditary_integral`)
 with the Prony series' shape (E∞ ≡ 1: only Eᵢ/E∞ and τᵢ are identifiable without a
-model of the skin), `travel` the stage's travel towards the skin, `onset_p` the travel
-at which press p's contact starts, `b_c` the channel's exponent and `A_{c,s}` its
-amplitude at the site (Pa). The residual stress of earlier presses carries into later
-ones through H. The basis is masked to the contact (δ > 0) rather than clipped at zero
-like :func:`hydrotact.visco.calc_contact_response`, so that the readings stay linear
-in the amplitudes; the two differ only where an earlier press's recovery outweighs a
+model of the skin), `travel` the stage's travel towards the skin and `onset_p` the
+travel at which press p's contact starts. Each channel's elastic law at a site is
+thus a sum of powers of the depth, g_{c,s}(δ) = Σ_j A_{c,s,j} (δ/δ_ref)^{p_j} with
+p = POWERS (1, 1.5, 2, 3: a flat punch, Hertz, a cone, stiffening): a single power
+law per channel does not describe barometers under a curved skin, whose local
+log-log slope runs from ~2.3 near the onset to ~1.4 at depth under the press, and
+to 3-10 for a barometer a few mm away (measured on the stage-log stand-in). The
+residual stress of earlier presses at a site carries into later ones through H.
+The basis is masked to the contact (δ > 0) rather than clipped at zero like
+:func:`hydrotact.visco.calc_contact_response`, so that the readings stay linear in
+the amplitudes; the two differ only where an earlier press's recovery outweighs a
 new press's first samples.
 
-The amplitudes, offsets and drifts enter linearly: for given nonlinear parameters
-(shape, exponents, onsets, lag) they are solved per channel by weighted least squares
-inside the residual (variable projection, Golub and Pereyra), so the outer solver
-only sees the few nonlinear parameters, and their Jacobian (by autodiff through the
-solve) is the exact one of the projected problem.
+The amplitudes A (shared by the logs) and the baselines' β (per log) enter linearly:
+for given nonlinear parameters (shape, onsets, lags) they are solved per channel by
+weighted least squares inside the residual (variable projection, Golub and Pereyra),
+so the outer solver only sees the few nonlinear parameters, and their Jacobian (by
+autodiff through the solve) is the exact one of the projected problem.
 """
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 
 from .._types import Array, Float, Int
 from ..visco import Prony, calc_hereditary_integral
 
-DEPTH_SCALE = 1e-3  # m: δ is measured in millimetres in the power law (amplitudes in Pa at 1 mm)
-EXPONENT_RANGE = (0.8, 3.0)  # flat punch 1, Hertz 1.5, cone 2; beyond 3 no contact law we know
+DEPTH_SCALE = 1e-3  # m: δ is measured in millimetres in the law (amplitudes in Pa at 1 mm)
+POWERS = (1.0, 1.5, 2.0, 3.0)  # the law's powers of the depth: flat punch, Hertz, cone, stiffening
 RIDGE = 1e-12  # relative to the normal matrix' diagonal: keeps an unused site's amplitude at 0
 
 
@@ -42,9 +47,11 @@ class PressData(eqx.Module):
     """One log for the lumped press model (device arrays).
 
     **Fields:** `times` (T,) s; `travel` (T,) m; `press` (T,) the press of each
-    sample (-1 between presses); `press_site` (P,) the site of each press;
-    `observed` (T, C) Pa; `weights` (T, C) 1 / noise, 0 for masked samples;
-    `num_sites` (static); `with_drift` (static) whether each channel has a linear drift.
+    sample (-1 between presses); `press_site` (P,) the site of each press (the sites
+    are shared by all the logs of a fit); `observed` (T, C) Pa; `weights` (T, C)
+    1 / noise, 0 for masked samples; `baseline` (T, D) the basis of each channel's
+    slowly varying baseline (offset and drift: a constant, a line, or a cubic
+    B-spline); `num_sites` (static) the number of sites of the whole fit.
     """
 
     times: Float[Array, " num_samples"]
@@ -53,13 +60,8 @@ class PressData(eqx.Module):
     press_site: Int[Array, " num_presses"]
     observed: Float[Array, "num_samples num_channels"]
     weights: Float[Array, "num_samples num_channels"]
+    baseline: Float[Array, "num_samples num_baseline"]
     num_sites: int = eqx.field(static=True)
-    with_drift: bool = eqx.field(static=True)
-
-
-def bounded(z, low, high):
-    """low + (high − low) · sigmoid(z): an unconstrained z onto (low, high)."""
-    return low + (high - low) * jax.nn.sigmoid(z)
 
 
 def calc_depths(data: PressData, onsets, lag):
@@ -69,64 +71,87 @@ def calc_depths(data: PressData, onsets, lag):
     return jnp.where(inside, jnp.maximum(travel - onsets[jnp.maximum(data.press, 0)], 0.0), 0.0)
 
 
-def calc_bases(shape: Prony, exponents, depths, data: PressData):
-    """(T, C, S) the bases B_{c,s}: per channel the power law of the depth, split by
-    site, through the hereditary integral, masked to the contact."""
+def calc_bases(shape: Prony, depths, data: PressData):
+    """(T, S, J) the bases B_{s,j}: the powers of the depth, split by site, through
+    the hereditary integral, masked to the contact."""
     positive = depths > 0.0
     log_depth = jnp.log(jnp.where(positive, depths / DEPTH_SCALE, 1.0))
-    law = jnp.where(positive[:, None], jnp.exp(log_depth[:, None] * exponents[None, :]), 0.0)  # (T, C)
+    law = jnp.where(positive[:, None], jnp.exp(log_depth[:, None] * jnp.asarray(POWERS)[None, :]), 0.0)  # (T, J)
     site = jnp.where(data.press >= 0, data.press_site[jnp.maximum(data.press, 0)], -1)
     by_site = (site[:, None] == jnp.arange(data.num_sites)[None, :]).astype(law.dtype)  # (T, S)
-    inputs = law[:, :, None] * by_site[:, None, :]
-    responses = calc_hereditary_integral(shape, data.times, inputs)
+    responses = calc_hereditary_integral(shape, data.times, by_site[:, :, None] * law[:, None, :])
     return jnp.where(positive[:, None, None], responses, 0.0)
 
 
-def _design(bases, data: PressData):
-    """(C, T, 1 [+ 1] + S) each channel's design matrix: offset, [drift,] bases."""
-    num_samples, num_channels, _ = bases.shape
-    columns = [jnp.ones((num_channels, num_samples, 1), bases.dtype)]
-    if data.with_drift:
-        span = jnp.maximum(data.times[-1] - data.times[0], 1e-300)
-        scaled = 2.0 * (data.times - data.times[0]) / span - 1.0
-        columns.append(jnp.broadcast_to(scaled[None, :, None], (num_channels, num_samples, 1)))
-    columns.append(jnp.transpose(bases, (1, 0, 2)))
-    return jnp.concatenate(columns, axis=2)
+def solve_linear(bases, datas):
+    """The linear parameters given each log's bases: per channel, weighted least
+    squares over every log's baseline coefficients and the amplitudes per site and
+    power (shared by the logs), by the normal equations assembled block by block
+    (Jacobi scaled; a tiny ridge keeps what a channel never sees at 0).
 
-
-def solve_linear(bases, data: PressData):
-    """The linear parameters given the bases: per channel, weighted least squares
-    over [offset, (drift,) amplitudes per site] by the normal equations (a tiny ridge
-    keeps a site a channel never sees at 0).
-
-    **Returns:** (coefficients (C, 1 [+ 1] + S), weighted residuals (T, C)).
+    **Returns:** (baseline coefficients per log [(C, D_l)], amplitudes (C, S, J),
+    weighted residuals per log [(T_l, C)]).
     """
-    design = _design(bases, data)  # (C, T, N)
-    weights = data.weights.T  # (C, T)
-    weighted = design * weights[:, :, None]
-    target = (data.observed.T * weights)[:, :, None]  # (C, T, 1)
-    normal = jnp.einsum("ctn,ctm->cnm", weighted, weighted)
-    scale = jnp.sqrt(jnp.maximum(jnp.diagonal(normal, axis1=1, axis2=2), 1e-300))  # (C, N)
-    scaled = normal / (scale[:, :, None] * scale[:, None, :]) + RIDGE * jnp.eye(normal.shape[1])[None]
-    rhs = jnp.einsum("ctn,ctk->cnk", weighted, target)[..., 0] / scale
-    coefficients = jnp.linalg.solve(scaled, rhs[..., None])[..., 0] / scale
-    residuals = target[..., 0] - jnp.einsum("ctn,cn->ct", weighted, coefficients)
-    return coefficients, residuals.T
+    sizes = [data.baseline.shape[1] for data in datas]
+    first = [sum(sizes[:k]) for k in range(len(sizes))]
+    num_baseline = sum(sizes)
+    _, num_sites, num_powers = bases[0].shape
+    num_channels = datas[0].observed.shape[1]
+    size = num_baseline + num_sites * num_powers
+    normal = jnp.zeros((num_channels, size, size), bases[0].dtype)
+    rhs = jnp.zeros((num_channels, size), bases[0].dtype)
+    weighted = []
+    for k, (basis, data) in enumerate(zip(bases, datas)):
+        weights = data.weights.T  # (C, T)
+        drift = data.baseline[None, :, :] * weights[:, :, None]  # (C, T, D)
+        columns = basis.reshape(basis.shape[0], -1)  # (T, S J)
+        sites = columns[None, :, :] * weights[:, :, None]  # (C, T, S J)
+        target = data.observed.T * weights  # (C, T)
+        weighted.append((drift, sites, target))
+        low, high = first[k], first[k] + sizes[k]
+        normal = normal.at[:, low:high, low:high].set(jnp.einsum("ctd,cte->cde", drift, drift))
+        cross = jnp.einsum("ctd,cts->cds", drift, sites)
+        normal = normal.at[:, low:high, num_baseline:].set(cross)
+        normal = normal.at[:, num_baseline:, low:high].set(jnp.transpose(cross, (0, 2, 1)))
+        normal = normal.at[:, num_baseline:, num_baseline:].add(jnp.einsum("cts,ctr->csr", sites, sites))
+        rhs = rhs.at[:, low:high].set(jnp.einsum("ctd,ct->cd", drift, target))
+        rhs = rhs.at[:, num_baseline:].add(jnp.einsum("cts,ct->cs", sites, target))
+    diagonal = jnp.diagonal(normal, axis1=1, axis2=2)  # (C, N); 0 for a site no press of the logs reaches
+    used = diagonal > 0.0
+    scale = jnp.where(used, jnp.sqrt(jnp.where(used, diagonal, 1.0)), 1.0)  # safe to differentiate where 0
+    scaled = normal / (scale[:, :, None] * scale[:, None, :]) + RIDGE * jnp.eye(size)[None]
+    coefficients = jnp.linalg.solve(scaled, (rhs / scale)[..., None])[..., 0] / scale
+    amplitudes = coefficients[:, num_baseline:]
+    drifts, residuals = [], []
+    for k, (drift, sites, target) in enumerate(weighted):
+        own = coefficients[:, first[k] : first[k] + sizes[k]]
+        drifts.append(own)
+        fitted = jnp.einsum("ctd,cd->ct", drift, own) + jnp.einsum("cts,cs->ct", sites, amplitudes)
+        residuals.append((target - fitted).T)
+    return drifts, amplitudes.reshape(num_channels, num_sites, num_powers), residuals
 
 
-def calc_press_residuals(shape: Prony, exponents, onsets, lag, data: PressData):
-    """Weighted residuals (T, C) of the lumped press model at the given nonlinear
-    parameters, the linear ones projected out; and the linear coefficients."""
-    bases = calc_bases(shape, exponents, calc_depths(data, onsets, lag), data)
-    coefficients, residuals = solve_linear(bases, data)
-    return residuals, coefficients
+def _all_bases(shape, onsets, lags, datas):
+    return [calc_bases(shape, calc_depths(data, onset, lag), data) for data, onset, lag in zip(datas, onsets, lags)]
 
 
-def calc_press_predictions(shape: Prony, exponents, onsets, lag, coefficients, data: PressData):
-    """(T, C) the model's readings for given linear coefficients (a held-out log's
-    prediction, with the amplitudes of a fit)."""
-    bases = calc_bases(shape, exponents, calc_depths(data, onsets, lag), data)
-    return jnp.einsum("ctn,cn->tc", _design(bases, data), coefficients)
+def calc_press_residuals(shape: Prony, onsets, lags, datas):
+    """Weighted residuals of the lumped press model over the logs `datas` (a tuple of
+    PressData; `onsets` a tuple of (P_l,) onsets, `lags` of lags, one per log) at the
+    given nonlinear parameters, the linear ones projected out.
+
+    **Returns:** (residuals per log [(T_l, C)], baseline coefficients per log
+    [(C, D_l)], amplitudes (C, S, J)).
+    """
+    drifts, amplitudes, residuals = solve_linear(_all_bases(shape, onsets, lags, datas), datas)
+    return residuals, drifts, amplitudes
+
+
+def calc_press_predictions(shape: Prony, onsets, lag, baseline_coefficients, amplitudes, data: PressData):
+    """(T, C) one log's readings for given linear parameters (baseline (C, D),
+    amplitudes (C, S, J)): a held-out log's prediction with the amplitudes of a fit."""
+    basis = calc_bases(shape, calc_depths(data, onsets, lag), data)
+    return data.baseline @ baseline_coefficients.T + jnp.einsum("tsj,csj->tc", basis, amplitudes)
 
 
 ONSET_HALF_RANGE = 0.3e-3  # m: a press's onset stays within this of its start value
@@ -135,34 +160,38 @@ LAG_BOUND = 0.5  # s: an estimated lag stays within ±this
 
 class PressLayout(eqx.Module):
     """Where the nonlinear parameters sit in x (static): log Eᵢ/E∞ (K), log τᵢ (K),
-    the exponents' unbounded coordinates (C), the onsets' (P), and the lag's (1, when
-    estimated)."""
+    each log's onsets' unbounded coordinates (P_l), and each log's lag's (1 per log,
+    when estimated)."""
 
     num_terms: int = eqx.field(static=True)
-    num_channels: int = eqx.field(static=True)
-    num_presses: int = eqx.field(static=True)
+    num_presses: tuple[int, ...] = eqx.field(static=True)
     estimate_lag: bool = eqx.field(static=True)
 
     @property
     def size(self) -> int:
-        return 2 * self.num_terms + self.num_channels + self.num_presses + int(self.estimate_lag)
+        return 2 * self.num_terms + sum(self.num_presses) + len(self.num_presses) * int(self.estimate_lag)
 
-    def unpack(self, x, onset_start, lag):
-        """(shape, exponents, onsets, lag) from x."""
-        k, c, p = self.num_terms, self.num_channels, self.num_presses
+    def unpack(self, x, onset_starts, lags):
+        """(shape, onsets per log, lags per log) from x; `onset_starts` the centres of
+        the onsets' ranges, `lags` the lags when they are not estimated."""
+        k = self.num_terms
         shape = Prony(jnp.ones((), x.dtype), jnp.exp(x[:k]), jnp.exp(x[k : 2 * k]))
-        exponents = bounded(x[2 * k : 2 * k + c], *EXPONENT_RANGE)
-        onsets = onset_start + ONSET_HALF_RANGE * jnp.tanh(x[2 * k + c : 2 * k + c + p])
+        first = 2 * k
+        onsets = []
+        for count, start in zip(self.num_presses, onset_starts):
+            onsets.append(start + ONSET_HALF_RANGE * jnp.tanh(x[first : first + count]))
+            first += count
         if self.estimate_lag:
-            lag = LAG_BOUND * jnp.tanh(x[-1])
-        return shape, exponents, onsets, lag
+            lags = tuple(LAG_BOUND * jnp.tanh(x[first + log]) for log in range(len(self.num_presses)))
+        return shape, tuple(onsets), tuple(lags)
 
 
 def press_residual_fn(layout: PressLayout):
-    """x, (data, onset_start, lag) -> the flat weighted residuals (for optimistix)."""
+    """x, (datas, onset_starts, lags) -> the flat weighted residuals (for optimistix)."""
 
     def residuals(x, args):
-        data, onset_start, lag = args
-        return calc_press_residuals(*layout.unpack(x, onset_start, lag), data)[0].reshape(-1)
+        datas, onset_starts, lags = args
+        per_log = calc_press_residuals(*layout.unpack(x, onset_starts, lags), datas)[0]
+        return jnp.concatenate([r.reshape(-1) for r in per_log])
 
     return residuals

@@ -9,6 +9,10 @@ level (the contact can start anywhere on the ramp: its onset is what the fit fin
 The rest level is the travel's 5th percentile; runs shorter than `min_samples` are
 stage noise, not presses.
 
+A gap in the log can swallow a press's retract, the move and the next approach: a run
+above the threshold in which the stage stands at a new site after a gap is cut there,
+and the piece after the cut is flagged *unseen* (its loading happened in the gap).
+
 A **site** is a stage position (`stage_x`, `stage_y`, or the columns a mapping names)
 shared by presses: positions within `site_tolerance` (default 1 um) are one site. A
 log without position columns has one site per press. The position must not change
@@ -23,6 +27,7 @@ from .._errors import HydrotactError
 
 PRESS_THRESHOLD = 0.05  # of the travel's range above its rest level
 SITE_TOLERANCE = 1e-6  # m: stage positions closer than this are one site
+GAP_FACTOR = 5.0  # a step this many times the typical one is a gap in the log
 POSITION_COLUMNS = ("stage_x", "stage_y")
 
 
@@ -30,12 +35,14 @@ POSITION_COLUMNS = ("stage_x", "stage_y")
 class Presses:
     """The presses of one log: `starts`, `ends` (P,) sample indices (end exclusive);
     `sites` (P,) the site of each press; `positions` (S, k) each site's stage
-    position (k = 0 without position columns)."""
+    position (k = 0 without position columns); `unseen` (P,) whether a press began
+    in a gap of the log (its loading history is unknown)."""
 
     starts: np.ndarray
     ends: np.ndarray
     sites: np.ndarray
     positions: np.ndarray
+    unseen: np.ndarray
 
     @property
     def num_presses(self) -> int:
@@ -53,8 +60,32 @@ class Presses:
         return index
 
 
-def find_presses(travel, *, threshold: float = PRESS_THRESHOLD, min_samples: int = 3, source: str = "log") -> tuple[np.ndarray, np.ndarray]:
-    """(starts, ends) of the presses in a travel column (see the module's docstring)."""
+def _split_at_hidden_moves(times, positions, starts, ends, tolerance):
+    """Runs cut where the stage stands at a new site after a gap in the log (the
+    retract, the move and the next approach fell into the gap); the pieces after a
+    cut are flagged unseen."""
+    steps = np.diff(times)
+    typical = float(np.median(steps)) if len(steps) else 0.0
+    pieces = []
+    for start, end in zip(starts, ends):
+        moved = np.any(np.abs(np.diff(positions[start:end], axis=0)) > tolerance, axis=1)
+        cuts = [start + 1 + int(r) for r in np.flatnonzero(moved) if steps[start + r] > GAP_FACTOR * typical]
+        bounds = [start, *cuts, end]
+        pieces += [(bounds[i], bounds[i + 1], i > 0) for i in range(len(bounds) - 1)]
+    return pieces
+
+
+def find_presses(
+    travel, *, threshold: float = PRESS_THRESHOLD, min_samples: int = 3, positions=None, times=None, tolerance: float = SITE_TOLERANCE,
+    source: str = "log",
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(starts, ends, unseen) of the presses in a travel column (see the module's
+    docstring). With `positions` (T, k) and `times` (T,), a run above the threshold
+    is cut where the stage stands at a new site after a gap longer than GAP_FACTOR
+    sampling steps (the piece after the cut began unseen), and a press is not widened
+    onto samples where the stage stands elsewhere than at its deepest sample (it moves
+    to the next site while it regains its rest level: a rest of 0.1 s is one or two
+    samples)."""
     travel = np.asarray(travel, dtype=np.float64)
     if not 0.0 < threshold < 1.0:
         raise HydrotactError(f"--press-threshold: must be between 0 and 1 (a fraction of the travel's range), got {threshold:g}")
@@ -65,19 +96,31 @@ def find_presses(travel, *, threshold: float = PRESS_THRESHOLD, min_samples: int
     above = travel > rest + threshold * span
     edges = np.diff(np.concatenate([[0], above.astype(np.int8), [0]]))
     starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    positions = np.zeros((len(travel), 0)) if positions is None else np.asarray(positions, dtype=np.float64).reshape(len(travel), -1)
+    if times is not None and positions.shape[1]:
+        pieces = _split_at_hidden_moves(np.asarray(times, dtype=np.float64), positions, starts, ends, tolerance)
+        starts, ends, unseen = (np.array([piece[i] for piece in pieces], dtype=np.int64) for i in range(3))
+        unseen = unseen.astype(bool)
+    else:
+        unseen = np.zeros(len(starts), dtype=bool)
     keep = ends - starts >= min_samples
-    starts, ends = starts[keep], ends[keep]
+    starts, ends, unseen = starts[keep], ends[keep], unseen[keep]
     if not len(starts):
         raise HydrotactError(f"{source}: no press lasts {min_samples} samples above {threshold:.0%} of the indentation's range")
     # Widen to where the stage leaves and regains its rest level (a small fraction of
     # the range: the rest level itself is noisy on real stages).
     moving = travel > rest + 0.01 * threshold * span
     for k in range(len(starts)):
-        while starts[k] > 0 and moving[starts[k] - 1] and (k == 0 or starts[k] - 1 >= ends[k - 1]):
+        here = positions[starts[k] + int(np.argmax(travel[starts[k] : ends[k]]))]
+
+        def same_site(row, here=here):
+            return bool(np.all(np.abs(positions[row] - here) <= tolerance))
+
+        while starts[k] > 0 and moving[starts[k] - 1] and (k == 0 or starts[k] - 1 >= ends[k - 1]) and same_site(starts[k] - 1):
             starts[k] -= 1
-        while ends[k] < len(travel) and moving[ends[k]] and (k + 1 == len(starts) or ends[k] < starts[k + 1]):
+        while ends[k] < len(travel) and moving[ends[k]] and (k + 1 == len(starts) or ends[k] < starts[k + 1]) and same_site(ends[k]):
             ends[k] += 1
-    return starts, ends
+    return starts, ends, unseen
 
 
 def group_sites(positions, starts, ends, *, tolerance: float = SITE_TOLERANCE, names=POSITION_COLUMNS, source: str = "log") -> tuple[np.ndarray, np.ndarray]:
@@ -111,8 +154,8 @@ def find_log_presses(log, indentation: str = "indentation", position_columns=POS
     site per press)."""
     if indentation not in log.columns:
         raise HydrotactError(f"{source}: no indentation column {indentation!r} (has {', '.join(log.columns)})")
-    starts, ends = find_presses(log.columns[indentation], threshold=threshold, source=source)
     names = tuple(name for name in position_columns if name in log.columns)
     positions = np.column_stack([np.asarray(log.columns[name], dtype=np.float64) for name in names]) if names else np.zeros((log.num_samples, 0))
+    starts, ends, unseen = find_presses(log.columns[indentation], threshold=threshold, positions=positions, times=log.times, source=source)
     sites, centres = group_sites(positions, starts, ends, names=names, source=source)
-    return Presses(starts=starts, ends=ends, sites=sites, positions=centres)
+    return Presses(starts=starts, ends=ends, sites=sites, positions=centres, unseen=unseen)

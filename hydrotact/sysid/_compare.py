@@ -1,0 +1,209 @@
+"""Predicting held-out stage logs from a lumped press fit (`hydrotact compare`).
+
+Everything comes from the fit's `material.json` (the relative Prony series and the
+channel law: exponents, each site's onset and amplitudes, the lag) except each log's
+baseline, the *tare*, which comes from the log itself:
+
+- "no-load" (default): each channel's baseline fitted to the log's samples between
+  presses (the fit's drift basis, by least squares), so nothing the model predicts
+  is tuned to the presses;
+- "first:N": the mean of each channel over the log's first N seconds (a log that
+  starts at rest and does not drift);
+- "all": the baseline that best fits all samples with the law fixed — what the fit
+  itself does, so a fit's own log comes back with the fit's residuals.
+
+For a log the fit used (the same SHA-256), the fit's own onsets and lag for that log
+(from its report.json) replace the per-site means.
+"""
+
+import dataclasses
+import json
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import HydrotactError
+from ..data import estimate_noise, read_material
+from ..visco import Prony
+from ._lumped import PressData, calc_bases, calc_depths
+from ._press_fit import DRIFT_KNOT_S, drift_basis, find_clipped
+from ._presses import SITE_TOLERANCE, find_log_presses
+from ._problem import _file_digest
+
+HOLD_TOLERANCE = 1e-6  # m: a press holds where its travel is within this of its deepest
+
+
+@dataclasses.dataclass(frozen=True)
+class Comparison:
+    """One held-out log against a fit's prediction: `source`, `channels`, `times`
+    (s), `observed`, `predicted` (T, C) Pa (the tare included), `mask` (T, C) True
+    where compared, `hold` (T,) the press held at each sample (-1 elsewhere), and
+    per channel `rms_pa`, `r2`, `hold_shape_rms_pa` (the residual during holds less
+    each hold's mean: how well the relaxation's shape is predicted), `noise_pa`."""
+
+    source: str
+    channels: tuple
+    times: np.ndarray
+    observed: np.ndarray
+    predicted: np.ndarray
+    mask: np.ndarray
+    hold: np.ndarray
+    rms_pa: np.ndarray
+    r2: np.ndarray
+    hold_shape_rms_pa: np.ndarray
+    noise_pa: np.ndarray
+
+    def to_json(self) -> dict:
+        return {
+            "source": self.source,
+            "channels": {
+                name: {"rms_Pa": float(self.rms_pa[c]), "r2": float(self.r2[c]), "hold_shape_rms_Pa": float(self.hold_shape_rms_pa[c]), "noise_Pa": float(self.noise_pa[c])}
+                for c, name in enumerate(self.channels)
+            },
+        }
+
+
+def parse_tare(text):
+    """'no-load', 'all' or 'first:N' (N seconds > 0)."""
+    if text in ("no-load", "all"):
+        return text
+    if isinstance(text, str) and text.startswith("first:"):
+        try:
+            seconds = float(text[len("first:") :])
+        except ValueError:
+            seconds = float("nan")
+        if seconds > 0:
+            return ("first", seconds)
+    raise HydrotactError(f"--tare: expected no-load, all or first:SECONDS, got {text!r}")
+
+
+def read_fit(fit_dir):
+    """(material document, report dict or None) of a fit folder, checked to hold a
+    lumped press fit."""
+    fit_dir = Path(fit_dir)
+    path = fit_dir / "material.json" if fit_dir.is_dir() else fit_dir
+    if not path.is_file():
+        raise HydrotactError(f"{fit_dir}: no material.json (give the folder a `hydrotact fit --lumped` wrote)")
+    document = read_material(path)
+    if "channel_law" not in document:
+        raise HydrotactError(f"{path}: no channel_law: compare needs a lumped press fit (`hydrotact fit --lumped`), which records each channel's law")
+    report_path = path.parent / "report.json"
+    report = json.loads(report_path.read_text(encoding="utf-8")) if report_path.is_file() else None
+    return document, report
+
+
+def _law_prony(document) -> Prony:
+    terms = document["prony_terms"]
+    return Prony(
+        jnp.asarray(float(document["long_term_modulus_Pa"]["value"])),
+        jnp.asarray([float(t["modulus_Pa"]["value"]) for t in terms]),
+        jnp.asarray([float(t["tau_s"]["value"]) for t in terms]),
+    )
+
+
+def _site_of(position, sites) -> int:
+    for s, site in enumerate(sites):
+        known = np.asarray(site["position_m"], dtype=np.float64)
+        if len(known) == len(position) and len(known) and np.all(np.abs(known - position) <= SITE_TOLERANCE):
+            return s
+    return -1
+
+
+def _own_log(report, digest):
+    """The fit report's entry for the fitted log with this digest (its onsets, lag)."""
+    if report is None or digest is None:
+        return None
+    for log in report.get("logs", []):
+        if log.get("sha256") == digest:
+            return log
+    return None
+
+
+def _solve_baseline(basis, observed, residual_free, used):
+    """(D, C) baseline coefficients fitting observed − residual_free on `used` (T, C)."""
+    coefficients = np.zeros((basis.shape[1], observed.shape[1]))
+    for c in range(observed.shape[1]):
+        rows = used[:, c]
+        if not rows.any():
+            raise HydrotactError("no sample to tare on")
+        design = basis[rows]
+        normal = design.T @ design
+        ridge = 1e-9 * np.trace(normal) / len(normal)
+        coefficients[:, c] = np.linalg.solve(normal + ridge * np.eye(len(normal)), design.T @ (observed[rows, c] - residual_free[rows, c]))
+    return coefficients
+
+
+def compare_log(document, report, log, source, *, tare="no-load", drift=None, report_message=None) -> Comparison:
+    """Predict one log from a fit (see the module's docstring)."""
+    say = report_message or (lambda message: None)
+    law = document["channel_law"]
+    tare = parse_tare(tare) if isinstance(tare, str) else tare
+    channels = tuple(law["exponents"])
+    missing = [name for name in channels if name not in log.columns]
+    if missing:
+        raise HydrotactError(f"{source}: no channel {missing[0]!r} of the fit (the log has {', '.join(log.metadata['channels'])})")
+    if law["indentation"] not in log.columns:
+        raise HydrotactError(f"{source}: no travel column {law['indentation']!r} (the fit's indentation column)")
+    presses = find_log_presses(log, law["indentation"], law["position_columns"], source=source)
+    own = _own_log(report, _file_digest(source))
+    sites = law["sites"]
+    if own is not None and len(own["presses"]) == int((~presses.unseen).sum()):
+        site_ids = np.array([p["site"] for p in own["presses"]])
+        onsets = np.array([p["onset_m"] for p in own["presses"]])
+        lag = float(own["lag_s"]["value"])
+        keep = ~presses.unseen
+    else:
+        site_ids = np.array([_site_of(presses.positions[s], sites) for s in presses.sites])
+        unknown = (site_ids < 0) & ~presses.unseen
+        if unknown.all():
+            raise HydrotactError(f"{source}: none of its presses is at a site of the fit (positions from {', '.join(law['position_columns']) or 'no columns'})")
+        if unknown.any():
+            say(f"{source}: {int(unknown.sum())} press(es) at sites the fit has not seen: not compared")
+        keep = (site_ids >= 0) & ~presses.unseen
+        onsets = np.array([sites[s]["onset_m"] for s in site_ids[keep]])
+        lag = float(law["lag_s"])
+        site_ids = site_ids[keep]
+    observed = np.column_stack([np.asarray(log.columns[name], dtype=np.float64) for name in channels])
+    times = np.asarray(log.times, dtype=np.float64)
+    mask = ~find_clipped(observed)
+    for start, end in zip(presses.starts[~keep], presses.ends[~keep]):
+        mask[start:end] = False
+    kept = dataclasses.replace(presses, starts=presses.starts[keep], ends=presses.ends[keep], sites=presses.sites[keep], unseen=presses.unseen[keep])
+    press = kept.press_of_samples(log.num_samples)
+    data = PressData(
+        jnp.asarray(times - times[0]), jnp.asarray(log.columns[law["indentation"]], dtype=jnp.float64), jnp.asarray(press),
+        jnp.asarray(site_ids), jnp.zeros(observed.shape), jnp.ones(observed.shape), jnp.zeros((len(times), 1)), len(sites),
+    )
+    exponents = jnp.asarray([float(law["exponents"][name]["value"]) for name in channels])
+    bases = np.asarray(calc_bases(_law_prony(document), exponents, calc_depths(data, jnp.asarray(onsets), lag), data))  # (T, C, S)
+    amplitudes = np.array([[site["amplitudes_Pa"][name] for site in sites] for name in channels])  # (C, S)
+    elastic = np.einsum("tcs,cs->tc", bases, amplitudes)
+    if isinstance(tare, tuple):
+        first = times - times[0] <= tare[1]
+        baseline = np.broadcast_to(np.mean(np.where(mask & first[:, None], observed, np.nan), axis=0)[None, :], observed.shape)
+        if first.sum() < 1:
+            raise HydrotactError(f"{source}: no samples in the first {tare[1]:g} s to tare on")
+    else:
+        basis = drift_basis(times, drift if drift is not None else DRIFT_KNOT_S)
+        used = mask if tare == "all" else mask & (press < 0)[:, None]
+        baseline = basis @ _solve_baseline(basis, observed, elastic, used)
+    predicted = baseline + elastic
+    hold = np.full(len(times), -1)
+    travel = np.asarray(log.columns[law["indentation"]], dtype=np.float64)
+    for p, (start, end) in enumerate(zip(kept.starts, kept.ends)):
+        deepest = travel[start:end].max()
+        hold[start:end][travel[start:end] >= deepest - HOLD_TOLERANCE] = p
+    error = np.where(mask, observed - predicted, np.nan)
+    rms = np.sqrt(np.nanmean(error**2, axis=0))
+    spread = np.nansum((np.where(mask, observed, np.nan) - np.nanmean(np.where(mask, observed, np.nan), axis=0)) ** 2, axis=0)
+    r2 = 1.0 - np.nansum(error**2, axis=0) / np.maximum(spread, 1e-300)
+    shaped = np.full(error.shape, np.nan)
+    for p in range(kept.num_presses):
+        rows = hold == p
+        if rows.sum() > 1:
+            shaped[rows] = error[rows] - np.nanmean(error[rows], axis=0)
+    return Comparison(
+        source=source, channels=channels, times=times, observed=observed, predicted=predicted, mask=mask, hold=hold, rms_pa=rms, r2=r2,
+        hold_shape_rms_pa=np.sqrt(np.nanmean(shaped**2, axis=0)), noise_pa=estimate_noise(observed),
+    )

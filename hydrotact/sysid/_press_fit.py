@@ -1,0 +1,513 @@
+"""Fitting the lumped press model to stage logs (host driver around the pure core of
+:mod:`hydrotact.sysid._lumped`).
+
+:func:`fit_press_logs` takes logs of one sensor pressed by a stage (the travel in an
+indentation column, the site in position columns) and fits, jointly over the logs:
+
+- shared: the relaxation shape (Eᵢ/E∞, τᵢ) and each channel's elastic law at each
+  site (amplitudes of powers of the depth, see :mod:`hydrotact.sysid._lumped`) —
+  sites are stage positions, matched across logs;
+- per log: each press's contact onset (within ±0.3 mm of its first estimate), the
+  lag of the pressures behind the stage (given, or estimated with `estimate_lag`),
+  and each channel's baseline (a constant, a line, or cubic B-splines with knots
+  `drift` seconds apart: real baselines drift by kPa within a file).
+
+Samples a barometer clipped (at the part's limits, or flat at a channel's maximum)
+are masked (weight 0), not refused. Each channel's noise is estimated from its own
+samples and weights its residuals, so the reduced χ² is ≈ 1 for a model that
+describes the data. Channels that respond to no press, and logs with no press or no
+responding channel, are skipped with a message through `report`.
+
+The result reports each parameter with its standard error and whether the data
+identify it: a parameter pinned at its bound, a time constant outside
+[sampling step / 10, 10 × the longest log], or one whose standard error exceeds its
+value is *not identified* — its value is the solver's last word, not a measurement.
+"""
+
+import dataclasses
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import HydrotactError
+from ..data import estimate_noise
+from ..data._table import sensor_spec
+from ._lumped import (
+    LAG_BOUND,
+    ONSET_HALF_RANGE,
+    POWERS,
+    PressData,
+    PressLayout,
+    calc_press_residuals,
+    press_residual_fn,
+)
+from ._presses import POSITION_COLUMNS, PRESS_THRESHOLD, SITE_TOLERANCE, find_log_presses
+from ._solve import make_solver, solve_least_squares, solver_name
+
+DRIFT_KNOT_S = 30.0  # s between the baseline spline's knots: slower than any relaxation we fit
+RESPONSE_SNR = 20.0  # a channel responds to a press when it moves this many noise stds
+CHI_SQUARE_WARNING = 4.0  # a reduced χ² above this: the model misses the data
+MAX_TERMS = 3  # Prony terms the lumped model tries with terms="auto"
+FLAT_TOP_SAMPLES = 3  # a channel's maximum held this many times is its clip level
+
+
+def drift_basis(times, drift) -> np.ndarray:
+    """(T, D) the baseline basis of a log: drift "none" (a constant), "linear", or a
+    knot spacing in s (cubic B-splines over the log, at least one interval)."""
+    times = np.asarray(times, dtype=np.float64)
+    span = max(float(times[-1] - times[0]), 1e-12)
+    scaled = (times - times[0]) / span
+    if drift == "none":
+        return np.ones((len(times), 1))
+    if drift == "linear":
+        return np.column_stack([np.ones_like(scaled), 2.0 * scaled - 1.0])
+    from scipy.interpolate import BSpline
+
+    intervals = max(1, math.ceil(span / float(drift)))
+    knots = np.concatenate([[0.0] * 3, np.linspace(0.0, 1.0, intervals + 1), [1.0] * 3])
+    return BSpline.design_matrix(np.clip(scaled, 0.0, 1.0), knots, 3).toarray()
+
+
+def parse_drift(text):
+    """'none', 'linear' or a knot spacing in seconds (a positive number)."""
+    if text in ("none", "linear"):
+        return text
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        raise HydrotactError(f"--drift: expected none, linear or a knot spacing in seconds, got {text!r}") from None
+    if not value > 0.0 or not math.isfinite(value):
+        raise HydrotactError(f"--drift: the knot spacing must be a positive number of seconds, got {text!r}")
+    return value
+
+
+def find_clipped(observed, upper=None, lower=None) -> np.ndarray:
+    """(T, C) samples a barometer clipped: at or beyond the part's limits (when
+    known), or at a channel's maximum (minimum) where that value repeats at least
+    FLAT_TOP_SAMPLES times (a clipped reading is flat; a noisy peak is not)."""
+    observed = np.asarray(observed, dtype=np.float64)
+    clipped = np.zeros(observed.shape, dtype=bool)
+    if upper is not None:
+        clipped |= observed >= upper
+    if lower is not None:
+        clipped |= observed <= lower
+    for extreme in (observed.max(axis=0), observed.min(axis=0)):
+        at = observed == extreme[None, :]
+        flat = at.sum(axis=0) >= FLAT_TOP_SAMPLES
+        clipped |= at & flat[None, :]
+    return clipped
+
+
+@dataclasses.dataclass(frozen=True)
+class PressLog:
+    """One log made ready for the fit (host): `source`; `times` (s from the log's
+    start), `travel`, `press`, `press_site` (global site ids), `observed`, `mask`
+    (True: fitted), `noise` (C,), `baseline` (T, D), `onset_start` (P,) the onsets'
+    first estimates, `clipped` (C,) masked samples per channel, `t0` the log's first
+    time."""
+
+    source: str
+    times: np.ndarray
+    travel: np.ndarray
+    press: np.ndarray
+    press_site: np.ndarray
+    observed: np.ndarray
+    mask: np.ndarray
+    noise: np.ndarray
+    baseline: np.ndarray
+    onset_start: np.ndarray
+    clipped: np.ndarray
+    t0: float
+
+    def to_data(self, num_sites: int) -> PressData:
+        weights = np.where(self.mask, 1.0 / self.noise[None, :], 0.0)
+        return PressData(
+            jnp.asarray(self.times), jnp.asarray(self.travel), jnp.asarray(self.press), jnp.asarray(self.press_site),
+            jnp.asarray(self.observed), jnp.asarray(weights), jnp.asarray(self.baseline), num_sites,
+        )
+
+
+def _responses(observed, travel, presses, noise) -> np.ndarray:
+    """(P, C) each press's step in each channel, in noise stds: the level at the
+    start of the hold (the first samples within 5 % of the press's deepest travel)
+    against the line through the levels just before and just after the press (the
+    baseline drifts: over a 20 s hold by more than a far channel's step). Presses
+    that began in a gap count 0."""
+    out = np.zeros((presses.num_presses, observed.shape[1]))
+    for p, (start, end) in enumerate(zip(presses.starts, presses.ends)):
+        if presses.unseen[p]:
+            continue
+        before = np.median(observed[max(start - 3, 0) : max(start, 1)], axis=0)
+        after = np.median(observed[min(end, len(observed) - 1) : end + 3], axis=0)
+        deep = start + np.flatnonzero(travel[start:end] >= travel[start] + 0.95 * (np.max(travel[start:end]) - travel[start]))[:3]
+        fraction = (np.mean(deep) - (start - 1)) / max(end - start + 1, 1)
+        out[p] = np.abs(np.median(observed[deep], axis=0) - (before + fraction * (after - before))) / noise
+    return out
+
+
+def _first_onsets(travel, observed, mask, presses, noise, lag, times) -> np.ndarray:
+    """(P,) each press's onset estimate, from its strongest channel's rise on the
+    approach: the (lagged) travel where the rise first passes 10 % and 50 % of its
+    step, extrapolated back to zero as for a law δ² (δ₁₀ = 0.45 δ₅₀; a Hertz law's
+    0.34 or a cone's 0.45 put the estimate within a third of (travel₅₀ − travel₁₀), well
+    inside the fitted onset's range). A press whose step is under 10 × RESPONSE_SNR
+    noise stds has a 10 % point lost in the noise: it starts at the median estimate of
+    the others (the skin's height varies little between sites a few mm apart)."""
+    lagged = np.interp(times - lag, times, travel)
+    onsets = np.full(presses.num_presses, np.nan)
+    for p, (start, end) in enumerate(zip(presses.starts, presses.ends)):
+        deepest = start + int(np.argmax(lagged[start:end]))
+        if deepest <= start:
+            continue
+        before = np.median(observed[max(start - 3, 0) : max(start, 1)], axis=0)
+        rise = np.where(mask[start : deepest + 1], (observed[start : deepest + 1] - before) * np.sign(observed[deepest] - before), np.nan)
+        strongest = int(np.nanargmax(np.nanmax(np.abs(rise), axis=0) / noise)) if np.isfinite(rise).any() else 0
+        curve = rise[:, strongest]
+        step = np.nanmax(curve)
+        if not step > 10 * RESPONSE_SNR * noise[strongest]:
+            continue
+        tenth = np.flatnonzero(curve >= 0.1 * step)
+        half = np.flatnonzero(curve >= 0.5 * step)
+        if not (tenth.size and half.size):
+            continue
+        low, high = lagged[start + tenth[0]], lagged[start + half[0]]
+        onsets[p] = low - 0.45 / 0.55 * max(high - low, 0.0)
+    weak = np.isnan(onsets)
+    if weak.all():
+        return np.array([float(np.max(lagged[start:end])) for start, end in zip(presses.starts, presses.ends)]) - ONSET_HALF_RANGE
+    onsets[weak] = np.median(onsets[~weak])
+    return onsets
+
+
+@dataclasses.dataclass(frozen=True)
+class Parameter:
+    """A fitted value with its standard error and whether the data identify it
+    (`note` says why not)."""
+
+    value: float
+    std: float
+    identified: bool = True
+    note: str = ""
+
+    def to_json(self) -> dict:
+        out = {"value": self.value, "std": self.std, "identified": self.identified}
+        if self.note:
+            out["note"] = self.note
+        return out
+
+
+@dataclasses.dataclass(frozen=True)
+class PressFit:
+    """A lumped press fit.
+
+    **Fields:** `ratios`, `taus` [Parameter] per Prony term (Eᵢ/E∞ and τᵢ, sorted by
+    τ); `amplitudes` (C, S, J) Pa at 1 mm per power of the law; `sites` (S, k)
+    stage positions, m; `site_onsets` (S,) the mean fitted onset per site (m of
+    travel); `onsets` per log (P_l,) m; `onset_stds` per log; `lags` per log
+    [Parameter]; `baselines` per log (C, D); `channels` fitted; `skipped` {name:
+    reason} for channels and logs left out; `logs` the PressLogs; `residuals` per log
+    (T, C) weighted (0 where masked); `chi_square`, `dof`, `converged`, `num_steps`,
+    `solver`, `drift`, `warnings` [str]; `num_terms`.
+    """
+
+    ratios: list
+    taus: list
+    amplitudes: np.ndarray
+    sites: np.ndarray
+    site_onsets: np.ndarray
+    onsets: list
+    onset_stds: list
+    lags: list
+    baselines: list
+    channels: tuple
+    skipped: dict
+    logs: list
+    residuals: list
+    chi_square: float
+    dof: int
+    converged: bool
+    num_steps: int
+    solver: str
+    drift: object
+    warnings: list
+    num_terms: int
+    position_columns: tuple
+    indentation: str
+    estimate_lag: bool
+
+    @property
+    def reduced_chi_square(self) -> float:
+        return self.chi_square / max(self.dof, 1)
+
+    def predictions(self) -> list:
+        """(T, C) the model's readings per log, Pa (observed − residual × noise)."""
+        return [log.observed - residual * log.noise[None, :] for log, residual in zip(self.logs, self.residuals)]
+
+
+def _press_durations(log: PressLog) -> np.ndarray:
+    """(P,) each press's duration, s."""
+    return np.array([np.ptp(log.times[log.press == p]) for p in range(len(log.onset_start))])
+
+
+def _initial_x(layout: PressLayout, logs: list[PressLog]) -> np.ndarray:
+    """The shape's start: the terms' τ spread log-evenly inside [4 sampling steps,
+    the median press] (the time scales a press can show), each Eᵢ/E∞ 0.05; exponents
+    onsets at their estimates; lags at 0 (or the given lag)."""
+    step = float(np.median(np.concatenate([np.diff(log.times) for log in logs])))
+    durations = np.concatenate([_press_durations(log) for log in logs])
+    k = layout.num_terms
+    taus = np.geomspace(4 * step, max(float(np.median(durations)), 40 * step), k + 2)[1:-1]
+    parts = [np.log(np.full(k, 0.05)), np.log(taus), np.zeros(sum(layout.num_presses))]
+    if layout.estimate_lag:
+        parts.append(np.zeros(len(logs)))
+    return np.concatenate(parts)
+
+
+def prepare_press_logs(
+    logs, sources, *, indentation="indentation", position_columns=POSITION_COLUMNS, drift=DRIFT_KNOT_S, lag=0.0,
+    saturation_pa=None, threshold=PRESS_THRESHOLD, report=None,
+):
+    """The logs made ready for the fit: presses and sites found, sites matched across
+    logs by position, clipped samples masked, noise estimated, silent channels and
+    logs without presses skipped (with a line through `report`).
+
+    **Returns:** (PressLogs, fitted channel names, site positions (S, k), skipped
+    {name: reason}).
+    """
+    report = report or (lambda message: None)
+    channels = list(logs[0].metadata["channels"])
+    for log, source in zip(logs, sources):
+        if list(log.metadata["channels"]) != channels:
+            raise HydrotactError(f"{source}: channels {', '.join(log.metadata['channels'])} differ from {sources[0]}'s ({', '.join(channels)}); a joint lumped fit needs logs of one sensor")
+    skipped, kept = {}, []
+    for log, source in zip(logs, sources):
+        try:
+            presses = find_log_presses(log, indentation, position_columns, threshold=threshold, source=source)
+        except HydrotactError as error:
+            if "no indentation column" in str(error) or "stage moves" in str(error):
+                raise
+            skipped[source] = str(error).removeprefix(f"{source}: ")
+            report(f"{source}: skipped: {skipped[source]}")
+            continue
+        if presses.unseen.all():
+            skipped[source] = "every press began in a gap of the log"
+            report(f"{source}: skipped: {skipped[source]}")
+            continue
+        if presses.unseen.any():
+            report(f"{source}: {int(presses.unseen.sum())} press(es) began in a gap of the log (loading unseen): masked")
+        kept.append((log, source, presses))
+    if not kept:
+        raise HydrotactError("no log has a press to fit: " + "; ".join(f"{name}: {reason}" for name, reason in skipped.items()))
+    # Sites shared by the logs: positions within SITE_TOLERANCE are one site; a log
+    # without position columns has sites of its own, one per press.
+    centres, prepared = [], []
+    for log, source, presses in kept:
+        if presses.positions.shape[1] == 0:
+            site_ids = np.arange(presses.num_presses) + len(centres)
+            centres.extend([np.full(len(position_columns), np.nan)] * presses.num_presses)
+        else:
+            site_ids = np.zeros(presses.num_sites, dtype=np.int64)
+            for s, position in enumerate(presses.positions):
+                match = [k for k, centre in enumerate(centres) if len(centre) == len(position) and np.all(np.abs(centre - position) <= SITE_TOLERANCE)]
+                site_ids[s] = match[0] if match else len(centres)
+                if not match:
+                    centres.append(np.asarray(position, dtype=np.float64))
+            site_ids = site_ids[presses.sites]
+        prepared.append((log, source, presses, site_ids))
+    # Channels: masked where clipped; fitted when they respond to some press.
+    staged = []
+    responding = np.zeros(len(channels), dtype=bool)
+    for log, source, presses, site_ids in prepared:
+        spec = sensor_spec(log.metadata.get("sensor", ""), source) if log.metadata.get("sensor") else None
+        upper = saturation_pa if saturation_pa is not None else (float(spec.part.range_pa[1]) if spec is not None and log.metadata.get("pressure") == "absolute" else None)
+        observed = np.asarray(log.channels, dtype=np.float64)
+        clipped = find_clipped(observed, upper)
+        noise = estimate_noise(observed)
+        log_responding = _responses(observed, np.asarray(log.columns[indentation], dtype=np.float64), presses, noise).max(axis=0, initial=0.0) > RESPONSE_SNR
+        responding |= log_responding
+        staged.append((log, source, presses, site_ids, observed, clipped, noise, log_responding))
+    for c, name in enumerate(channels):
+        if not responding[c]:
+            skipped[name] = f"channel {name!r} moves less than {RESPONSE_SNR:g} noise stds in every press: not fitted"
+            report(f"skipped: {skipped[name]}")
+    if not responding.any():
+        raise HydrotactError("no channel responds to the presses in any log (each moves less than " f"{RESPONSE_SNR:g} noise stds): nothing to fit")
+    fitted = np.flatnonzero(responding)
+    out = []
+    for log, source, presses, site_ids, observed, clipped, noise, log_responding in staged:
+        if not log_responding[fitted].any():
+            skipped[source] = f"no channel responds to its presses (each moves less than {RESPONSE_SNR:g} noise stds)"
+            report(f"{source}: skipped: {skipped[source]}")
+            continue
+        times = np.asarray(log.times, dtype=np.float64)
+        travel = np.asarray(log.columns[indentation], dtype=np.float64)
+        mask = ~clipped[:, fitted]
+        for start, end in zip(presses.starts[presses.unseen], presses.ends[presses.unseen]):
+            mask[start:end] = False
+        seen = dataclasses.replace(presses, starts=presses.starts[~presses.unseen], ends=presses.ends[~presses.unseen], sites=presses.sites[~presses.unseen], unseen=presses.unseen[~presses.unseen])
+        onset_start = _first_onsets(travel, observed[:, fitted], mask, seen, noise[fitted], float(lag), times)
+        out.append(PressLog(
+            source=source, times=times - times[0], travel=travel, press=seen.press_of_samples(log.num_samples), press_site=site_ids[~presses.unseen],
+            observed=observed[:, fitted], mask=mask, noise=noise[fitted], baseline=drift_basis(times, drift), onset_start=onset_start,
+            clipped=clipped[:, fitted].sum(axis=0), t0=float(times[0]),
+        ))
+        if clipped[:, fitted].any():
+            counts = ", ".join(f"{channels[c]} {n}" for c, n in zip(fitted, clipped[:, fitted].sum(axis=0)) if n)
+            report(f"{source}: masked clipped samples ({counts})")
+    if not out:
+        raise HydrotactError("no log has a responding channel: " + "; ".join(f"{name}: {reason}" for name, reason in skipped.items()))
+    width = max((len(c) for c in centres), default=0)
+    sites = np.array([np.resize(c, width) for c in centres]) if centres else np.zeros((0, 0))
+    return out, tuple(channels[c] for c in fitted), sites, skipped
+
+
+def _identified_time(value, std, step, span):
+    if not step / 10 <= value <= 10 * span:
+        return False, f"outside [{step / 10:.3g} s, {10 * span:.3g} s] (sampling step / 10, 10 x the longest log)"
+    if not std < value:
+        return False, "standard error larger than the value"
+    return True, ""
+
+
+def _fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps):
+    layout = PressLayout(num_terms, tuple(len(log.onset_start) for log in logs), estimate_lag)
+    datas = tuple(log.to_data(num_sites) for log in logs)
+    args = (datas, tuple(jnp.asarray(log.onset_start) for log in logs), tuple(jnp.asarray(float(lag)) for _ in logs))
+    x0 = jnp.asarray(_initial_x(layout, logs))
+    residual_fn = press_residual_fn(layout)
+    solution = jax.jit(lambda x, a: solve_least_squares(residual_fn, x, a, solver, max_steps=max_steps, throw=False))(x0, args)
+    return layout, datas, args, solution
+
+
+def fit_press_logs(
+    logs, sources=None, *, terms="auto", indentation="indentation", position_columns=POSITION_COLUMNS, drift=DRIFT_KNOT_S,
+    lag=0.0, estimate_lag=False, saturation_pa=None, threshold=PRESS_THRESHOLD, solver=None, max_steps=400, report=None,
+) -> PressFit:
+    """Fit the lumped press model jointly to stage logs (see the module's docstring).
+
+    **Arguments:** `logs` BarometerLogs of one sensor; `sources` their names for
+    messages; `terms` Prony terms (0-3) or "auto" (lowest BIC over 1-3); `indentation`
+    the stage travel column; `position_columns` the stage position columns (those a
+    log lacks are ignored: then one site per press); `drift` "none", "linear" or the
+    baseline spline's knot spacing, s; `lag` the pressures' lag behind the stage, s
+    (the start when `estimate_lag`); `saturation_pa` the upper reading limit (default:
+    the log's part's, for absolute logs of a known sensor); `threshold` the press
+    threshold (fraction of the travel's range); `solver` a least-squares solver
+    object or name (default Levenberg-Marquardt); `max_steps`; `report(message)`
+    receives the skipped channels and logs and the warnings.
+
+    **Returns:** a :class:`PressFit`.
+    """
+    with jax.enable_x64(True):  # absolute readings (~1e5 Pa) to a Pa, and normal equations: float64
+        return _fit_press_logs(
+            logs, sources, terms=terms, indentation=indentation, position_columns=position_columns, drift=drift, lag=lag,
+            estimate_lag=estimate_lag, saturation_pa=saturation_pa, threshold=threshold, solver=solver, max_steps=max_steps, report=report,
+        )
+
+
+def _fit_press_logs(logs, sources, *, terms, indentation, position_columns, drift, lag, estimate_lag, saturation_pa, threshold, solver, max_steps, report):
+    report = report or (lambda message: None)
+    sources = list(sources) if sources is not None else [f"log {k + 1}" for k in range(len(logs))]
+    if not logs:
+        raise HydrotactError("no logs given")
+    if terms != "auto" and not (isinstance(terms, int) and 0 <= terms <= MAX_TERMS):
+        raise HydrotactError(f"--terms: a lumped fit takes 0 to {MAX_TERMS} Prony terms or auto, got {terms!r}")
+    if not (isinstance(max_steps, int) and max_steps >= 1):
+        raise HydrotactError(f"--max-steps: expected a positive whole number of steps, got {max_steps!r}")
+    if not abs(float(lag)) < LAG_BOUND:
+        raise HydrotactError(f"--lag: expected a lag within ±{LAG_BOUND:g} s, got {lag!r}")
+    solver = make_solver(solver or "lm") if solver is None or isinstance(solver, str) else solver
+    prepared, channels, sites, skipped = prepare_press_logs(
+        logs, sources, indentation=indentation, position_columns=position_columns, drift=drift, lag=lag, saturation_pa=saturation_pa,
+        threshold=threshold, report=report,
+    )
+    num_used = int(sum(log.mask.sum() for log in prepared))
+    num_linear = (sum(log.baseline.shape[1] for log in prepared) + len(sites) * len(POWERS)) * len(channels)
+    counts = range(1, MAX_TERMS + 1) if terms == "auto" else [terms]
+    best = None
+    for count in counts:
+        layout, datas, args, solution = _fit_terms(count, prepared, len(sites), estimate_lag, lag, solver, max_steps)
+        residuals = press_residual_fn(layout)(solution.value, args)
+        chi_square = float(jnp.sum(residuals**2))
+        bic = chi_square + (layout.size + num_linear) * math.log(num_used)
+        if best is None or bic < best[0]:
+            best = (bic, count, layout, datas, args, solution, chi_square)
+    _, count, layout, datas, args, solution, chi_square = best
+    return _summarise(layout, datas, args, solution, chi_square, prepared, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, report, position_columns, indentation)
+
+
+def _summarise(layout, datas, args, solution, chi_square, logs, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, report, position_columns, indentation) -> PressFit:
+    x = solution.value
+    residual_fn = press_residual_fn(layout)
+    jacobian = np.asarray(jax.jacfwd(residual_fn)(x, args))
+    dof = max(num_used - layout.size - num_linear, 1)
+    scale = max(chi_square / dof, 1.0)
+    normal = jacobian.T @ jacobian
+    covariance = np.linalg.pinv(normal) * scale
+    std_x = np.sqrt(np.maximum(np.diag(covariance), 0.0))
+    x = np.asarray(x)
+    shape, onsets, lags = layout.unpack(jnp.asarray(x), *args[1:])
+    residuals, baselines, amplitudes = calc_press_residuals(shape, onsets, lags, datas)
+    k = layout.num_terms
+    step = float(np.median(np.concatenate([np.diff(log.times) for log in logs])))
+    span = max(float(log.times[-1] - log.times[0]) for log in logs)
+    order = np.argsort(x[k : 2 * k])
+    ratios, taus = [], []
+    for i in order:
+        ratio, ratio_std = math.exp(x[i]), math.exp(x[i]) * std_x[i]
+        tau, tau_std = math.exp(x[k + i]), math.exp(x[k + i]) * std_x[k + i]
+        ok, note = _identified_time(tau, tau_std, step, span)
+        ratios.append(Parameter(ratio, ratio_std, ok and ratio_std < ratio, note or ("" if ratio_std < ratio else "standard error larger than the value")))
+        taus.append(Parameter(tau, tau_std, ok, note))
+    first = 2 * k
+    onset_values, onset_stds = [], []
+    for log, onset in zip(logs, onsets):
+        count = len(log.onset_start)
+        z = x[first : first + count]
+        onset_values.append(np.asarray(onset))
+        onset_stds.append(ONSET_HALF_RANGE * (1 - np.tanh(z) ** 2) * std_x[first : first + count])
+        pinned = np.abs(np.tanh(z)) > 0.999
+        if pinned.any():
+            report(f"{log.source}: {int(pinned.sum())} press onsets at their bound (±{ONSET_HALF_RANGE * 1e3:g} mm of the first estimate): not identified")
+        first += count
+    lag_params = []
+    for j, lag in enumerate(lags):
+        if estimate_lag:
+            z = x[first + j]
+            std = LAG_BOUND * (1 - math.tanh(z) ** 2) * std_x[first + j]
+            pinned = abs(math.tanh(z)) > 0.999
+            lag_params.append(Parameter(float(lag), float(std), not pinned, f"at its bound (±{LAG_BOUND:g} s)" if pinned else ""))
+        else:
+            lag_params.append(Parameter(float(lag), 0.0, True, "given"))
+    site_onsets = np.full(len(sites), np.nan)
+    for s in range(len(sites)):
+        values = [float(onset[p]) for log, onset in zip(logs, onset_values) for p in np.flatnonzero(log.press_site == s)]
+        if values:
+            site_onsets[s] = float(np.mean(values))
+    # Sites seen only in presses that began in gaps have no onset: left out of the result.
+    seen = np.isfinite(site_onsets)
+    renumber = np.cumsum(seen) - 1
+    logs = [dataclasses.replace(log, press_site=renumber[log.press_site]) for log in logs]
+    sites, site_onsets, amplitudes = sites[seen], site_onsets[seen], np.asarray(amplitudes)[:, seen, :]
+    messages = []
+    converged = bool(solution.converged)
+    if not converged:
+        messages.append(f"the {solver_name(solver)} solver stopped before converging ({int(solution.num_steps)} steps; raise --max-steps); the numbers are its last iterate")
+    reduced = chi_square / dof
+    if reduced > CHI_SQUARE_WARNING:
+        messages.append(f"reduced χ² {reduced:.3g}: the model misses the data by more than their noise (RMS residual {math.sqrt(reduced):.2g} noise stds); check the drift setting, the lag and the masks")
+    unidentified = [f"τ{i + 1}" for i, t in enumerate(taus) if not t.identified] + [f"E{i + 1}/E∞" for i, r in enumerate(ratios) if not r.identified]
+    unidentified += [f"lag of {log.source}" for log, lag in zip(logs, lag_params) if not lag.identified]
+    if unidentified:
+        messages.append(f"not identified by these logs: {', '.join(unidentified)} (see the report)")
+    for message in messages:
+        report(message)
+    return PressFit(
+        ratios=ratios, taus=taus, amplitudes=np.asarray(amplitudes), sites=sites,
+        site_onsets=site_onsets, onsets=onset_values, onset_stds=onset_stds, lags=lag_params, baselines=[np.asarray(b) for b in baselines],
+        channels=channels, skipped=skipped, logs=logs, residuals=[np.asarray(r) for r in residuals], chi_square=chi_square, dof=dof,
+        converged=converged, num_steps=int(solution.num_steps), solver=solver_name(solver), drift=drift, warnings=messages, num_terms=k,
+        position_columns=tuple(position_columns), indentation=indentation, estimate_lag=estimate_lag,
+    )

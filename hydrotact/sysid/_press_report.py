@@ -1,0 +1,130 @@
+"""What a lumped press fit leaves behind: `material.json` (the relative Prony series
+and the channel law that `compare` predicts with), `report.json` and plots."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from .._files import write_text_atomic
+from ..data import make_material_document, write_material
+from ._lumped import DEPTH_SCALE
+from ._press_fit import PressFit
+from ._problem import _file_digest
+
+
+def make_press_material(fit: PressFit, paths=(), name: str | None = None) -> dict:
+    """The material document of a press fit (schema-checked): E∞ ≡ 1 (relative), the
+    terms' Eᵢ/E∞ and τᵢ with standard errors, and `channel_law`."""
+    provenance = {
+        "method": "fit",
+        "mode": "lumped",
+        "solver": fit.solver,
+        "logs": [{"path": str(path), **({"sha256": _file_digest(path)} if _file_digest(path) else {})} for path in paths],
+        "num_samples": int(sum(int(log.mask.any(axis=1).sum()) for log in fit.logs)),
+        "cost": 0.5 * fit.chi_square,
+    }
+    document = make_material_document(
+        1.0,
+        [r.value for r in fit.ratios],
+        [t.value for t in fit.taus],
+        stds={"moduli": [r.std for r in fit.ratios], "taus": [t.std for t in fit.taus]},
+        provenance=provenance,
+        name=name,
+        description=f"Fitted by hydrotact {__version__} (lumped press model, {fit.num_terms} Prony terms, solver {fit.solver}): relative moduli E_i / E_inf.",
+    )
+    document["modulus_scale"] = "relative"
+    document["channel_law"] = channel_law(fit)
+    write_order = ["format", "version", "name", "description", "modulus_scale", "long_term_modulus_Pa", "prony_terms", "instantaneous_modulus_Pa", "channel_law", "provenance"]
+    return {key: document[key] for key in write_order if key in document}
+
+
+def channel_law(fit: PressFit) -> dict:
+    """The channel law of a fit, as material.json's `channel_law`."""
+    sites = []
+    for s, position in enumerate(fit.sites):
+        sites.append({
+            "position_m": [float(v) for v in position] if np.all(np.isfinite(position)) else [],
+            "onset_m": float(fit.site_onsets[s]),
+            "amplitudes_Pa": {name: float(fit.amplitudes[c, s]) for c, name in enumerate(fit.channels)},
+        })
+    return {
+        "indentation": fit.indentation,
+        "position_columns": list(fit.position_columns),
+        "depth_scale_m": DEPTH_SCALE,
+        "lag_s": float(np.mean([lag.value for lag in fit.lags])),
+        "exponents": {name: {"value": e.value, "std": e.std} for name, e in fit.exponents.items()},
+        "sites": sites,
+    }
+
+
+def residual_summary(fit: PressFit) -> list:
+    """Per log and channel: RMS residual (Pa), R², masked samples."""
+    out = []
+    for log, residual in zip(fit.logs, fit.residuals):
+        channels = {}
+        for c, name in enumerate(fit.channels):
+            used = log.mask[:, c]
+            error = (residual[:, c] * log.noise[c])[used]
+            observed = log.observed[used, c]
+            variation = float(np.sum((observed - observed.mean()) ** 2))
+            channels[name] = {
+                "rms_Pa": float(np.sqrt(np.mean(error**2))) if used.any() else None,
+                "r2": 1.0 - float(np.sum(error**2)) / variation if variation > 0 else None,
+                "noise_Pa": float(log.noise[c]),
+                "masked": int((~used).sum()),
+            }
+        out.append({"source": log.source, "channels": channels})
+    return out
+
+
+def make_press_report(fit: PressFit) -> dict:
+    """The press fit's numbers as a JSON-ready dict."""
+    return {
+        "generator": f"hydrotact {__version__}",
+        "mode": "lumped",
+        "model": "press",
+        "solver": fit.solver,
+        "num_terms": fit.num_terms,
+        "converged": fit.converged,
+        "num_steps": fit.num_steps,
+        "chi_square": fit.chi_square,
+        "dof": fit.dof,
+        "reduced_chi_square": fit.reduced_chi_square,
+        "modulus_scale": "relative",
+        "drift": fit.drift,
+        "prony_terms": [{"ratio": r.to_json(), "tau_s": t.to_json()} for r, t in zip(fit.ratios, fit.taus)],
+        "exponents": {name: e.to_json() for name, e in fit.exponents.items()},
+        "logs": [
+            {
+                "source": log.source,
+                "lag_s": lag.to_json(),
+                "presses": [
+                    {"site": int(site), "onset_m": float(onset), "onset_std_m": float(std)}
+                    for site, onset, std in zip(log.press_site, onsets, stds)
+                ],
+            }
+            for log, lag, onsets, stds in zip(fit.logs, fit.lags, fit.onsets, fit.onset_stds)
+        ],
+        "channel_law": channel_law(fit),
+        "residuals": residual_summary(fit),
+        "skipped": fit.skipped,
+        "warnings": fit.warnings,
+    }
+
+
+def write_press_fit_outputs(fit: PressFit, out_dir, paths=(), plot=None) -> dict:
+    """material.json, report.json and, with `plot(fit, out_dir) -> {name: path}`,
+    the plots in out_dir (each written atomically). Returns the report, with
+    `files`."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    files = {"material": str(out_dir / "material.json"), "report": str(out_dir / "report.json")}
+    write_material(files["material"], make_press_material(fit, paths))
+    report = make_press_report(fit)
+    if plot is not None:
+        files.update(plot(fit, out_dir))
+    report["files"] = files
+    write_text_atomic(files["report"], json.dumps(report, indent=2) + "\n")
+    return report
