@@ -13,9 +13,9 @@ import sys
 
 from .. import __version__
 from .._errors import HydrotactError
-from . import contact, demo, field, fit, mesh, simulate
+from . import compare, contact, demo, field, fit, mesh, simulate
 
-COMMANDS = (mesh, field, contact, simulate, fit, demo)
+COMMANDS = (mesh, field, contact, simulate, fit, compare, demo)
 """The commands, in the order `hydrotact --help` lists them."""
 
 # Planned, each its own module here once its library stage exists: generate

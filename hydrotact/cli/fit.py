@@ -1,17 +1,50 @@
 """`hydrotact fit`: fit the elastomer's Prony material (and channel gains and offsets)
-to barometer logs; print the parameters with standard errors."""
+to barometer logs; print the parameters with standard errors.
+
+`--lumped` is for a sensor nobody has modelled, pressed by a stage: the logs need the
+stage's travel towards the skin (--indentation) and, when the probe moves between
+presses, its position (--position-columns); see hydrotact.sysid.fit_press_logs."""
 
 import json
 import sys
 from pathlib import Path
+
+from ._arguments import number
 
 
 def add_parser(subparsers):
     parser = subparsers.add_parser("fit", help="fit the elastomer's Prony material (and channel gains and offsets) to barometer logs")
     parser.add_argument("logs", nargs="+", type=Path, metavar="LOG", help="barometer logs (.parquet, or .csv with its .json or a --mapping); several are fitted jointly")
     parser.add_argument("--sensor", metavar="S", help="the sensor spec (built-in name or JSON file); default: the log's own")
-    parser.add_argument("--lumped", action="store_true", help="no sensor model: each channel a power law of the indentation column, fitted with the kernel")
-    parser.add_argument("--indentation", default="indentation", metavar="COL", help="the indentation column of a --lumped fit (default indentation)")
+    parser.add_argument(
+        "--lumped", action="store_true",
+        help="no sensor model: a stage pressed the skin at sites (positions that never change during a press); each channel's reading at a site is a law "
+        "of the depth past the press's contact onset (fitted per press) through the relaxation, on a drifting baseline; the shape of E(t) is shared, "
+        "its scale not identified (E_inf = 1); no --sensor needed",
+    )
+    parser.add_argument(
+        "--indentation", default="indentation", metavar="COL",
+        help="--lumped: the stage's travel towards the skin, m (not the depth: the onsets are fitted; default indentation)",
+    )
+    parser.add_argument(
+        "--position-columns", default="stage_x,stage_y", metavar="COLS",
+        help="--lumped: the stage position columns naming the sites (default stage_x,stage_y; absent ones are ignored: then one site per press)",
+    )
+    parser.add_argument(
+        "--drift", default="30", metavar="S|linear|none",
+        help="--lumped: each channel's baseline per log: cubic B-splines with knots S seconds apart (default 30), a line, or a constant",
+    )
+    parser.add_argument("--lag", type=number, default=0.0, metavar="S", help="--lumped: how far the pressures lag the logged stage, s (default 0; the start with --estimate-lag)")
+    parser.add_argument("--estimate-lag", action="store_true", help="--lumped: fit the lag per log (within ±0.5 s)")
+    parser.add_argument(
+        "--saturation", type=number, metavar="PA",
+        help="--lumped: readings at or above this are clipped and masked (default: the part's upper limit for absolute logs of a known sensor; flat maxima always)",
+    )
+    parser.add_argument(
+        "--press-threshold", type=number, default=0.05, metavar="F",
+        help="--lumped: a press is where the travel is above its rest level by this fraction of its range (default 0.05)",
+    )
+    parser.add_argument("--max-steps", type=int, default=400, metavar="N", help="solver steps before it stops (default 400)")
     parser.add_argument("--mapping", type=Path, metavar="MAP.json", help="column mapping for logs of your own layout")
     parser.add_argument("--terms", default="auto", metavar="N|auto", help="Prony terms, or auto (lowest BIC over 0-4; default)")
     parser.add_argument("--solver", default="lm", choices=["lm", "gn", "dogleg", "bfgs", "lbfgsb"], help="lm (Levenberg-Marquardt, default), gn, dogleg, bfgs or lbfgsb (jaxopt, bounded)")
@@ -24,16 +57,24 @@ def add_parser(subparsers):
 
 
 def run(args) -> None:
-    from ..sysid import fit_logs
-    from ..viz import plot_fit
+    from ..sysid import fit_logs, parse_drift
+    from ..viz import plot_fit, plot_press_fit
 
+    press_options = None
+    if args.lumped:
+        press_options = {
+            "position_columns": tuple(name for name in args.position_columns.split(",") if name), "drift": parse_drift(args.drift), "lag": args.lag,
+            "estimate_lag": args.estimate_lag, "saturation_pa": args.saturation, "threshold": args.press_threshold, "max_steps": args.max_steps,
+        }
     report = fit_logs(
         args.logs, args.output, sensor=args.sensor, lumped=args.lumped, indentation=args.indentation, mapping=args.mapping,
         terms=args.terms, solver=args.solver, tare=args.tare, field=args.field, num_rays=args.rays, progress=not args.json,
-        report_warning=_warn, plot=plot_fit,
+        report_warning=_warn, plot=plot_press_fit if args.lumped else plot_fit, press_options=press_options,
     )
     if args.json:
         print(json.dumps(report, indent=2))
+    elif args.lumped:
+        print_press_table(report)
     else:
         print_fit_table(report)
         print(f"hydrotact fit: results in {args.output}/")
@@ -78,6 +119,32 @@ def print_fit_table(report: dict, truth: dict | None = None) -> None:
     if len(report["gains"]) > 8:
         table.add_row(f"... {len(report['gains']) - 8} more gains in report.json", *[""] * (len(table.columns) - 1))
     Console().print(table)
+
+
+def print_press_table(report: dict) -> None:
+    """A lumped fit's shape, lags and fit statistics; parameters the data do not
+    identify are marked so, not printed as exact."""
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=f"lumped press fit ({report['num_terms']} Prony terms, {report['solver']}, reduced χ² {report['reduced_chi_square']:.3f}; E∞ ≡ 1)")
+    for column in ("parameter", "fitted", "± std. error", ""):
+        table.add_column(column, justify="left" if column in ("parameter", "") else "right")
+
+    def row(name, entry, unit=""):
+        note = "" if entry["identified"] else f"NOT IDENTIFIED: {entry.get('note', '')}"
+        table.add_row(name, f"{entry['value']:.6g}{unit}", f"{entry['std']:.3g}{unit}", note)
+
+    for k, term in enumerate(report["prony_terms"]):
+        row(f"E{k + 1}/E∞", term["ratio"])
+        row(f"τ{k + 1}", term["tau_s"], " s")
+    for log in report["logs"][:8]:
+        if log["lag_s"].get("note") != "given":
+            row(f"lag {log['source']}", log["lag_s"], " s")
+    Console().print(table)
+    for entry in report["residuals"]:
+        cells = ", ".join(f"{name} {c['rms_Pa']:.3g} Pa (R² {c['r2']:.5f})" for name, c in entry["channels"].items() if c["rms_Pa"] is not None)
+        print(f"  {entry['source']}: RMS residual {cells}")
 
 
 def _get(truth, key, k):

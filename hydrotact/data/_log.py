@@ -274,7 +274,7 @@ def read_table(path, source: str | None = None, *, delimiter: str = ",", skip_ro
     return {name: _to_numpy(table.column(name), name, source) for name in names}
 
 
-def read_log(path, mapping=None, *, sensor: str | None = None) -> BarometerLog:
+def read_log(path, mapping=None, *, sensor: str | None = None, require_sensor: bool = True) -> BarometerLog:
     """Read and check a barometer log.
 
     Without `mapping`, the file is a hydrotact log: Parquet with its metadata inside,
@@ -292,6 +292,8 @@ def read_log(path, mapping=None, *, sensor: str | None = None) -> BarometerLog:
     - `mapping`: a column mapping for a file of the user's own layout, or None.
     - `sensor`: the sensor spec (built-in name or JSON path); with a mapping it
       overrides the mapping's `sensor`; without one it must agree with the log's.
+    - `require_sensor`: with a mapping, refuse a log whose sensor neither the mapping
+      nor `sensor` names (False: label it `unnamed`, for a lumped fit).
 
     **Returns:** the :class:`BarometerLog`, SI units.
     """
@@ -304,7 +306,7 @@ def read_log(path, mapping=None, *, sensor: str | None = None) -> BarometerLog:
     if mapping is not None:
         mapping = mapping if isinstance(mapping, ColumnMapping) else load_mapping(mapping)
         columns = read_table(path, source, **mapping.csv_options) if suffix == ".csv" else read_table(path, source)
-        log = apply_mapping(columns, mapping, source, sensor=sensor)
+        log = apply_mapping(columns, mapping, source, sensor=sensor, require_sensor=require_sensor)
     elif suffix == ".csv":
         beside = metadata_path(path)
         if not beside.is_file():

@@ -144,7 +144,7 @@ def _channel_names(mapping: ColumnMapping, columns: list[str], taxel_names, sour
     return names
 
 
-def apply_mapping(table_columns: dict, mapping, source: str, *, sensor: str | None = None):
+def apply_mapping(table_columns: dict, mapping, source: str, *, sensor: str | None = None, require_sensor: bool = True):
     """Make a barometer log in SI from the columns of a user's table.
 
     Every mapped column is converted, SI = (raw + offset) x unit factor x scale, and
@@ -157,6 +157,8 @@ def apply_mapping(table_columns: dict, mapping, source: str, *, sensor: str | No
     - `mapping`: a :class:`ColumnMapping` (or a mapping document, checked here).
     - `source`: the data file's name, for messages.
     - `sensor`: the sensor spec (built-in name or JSON path); overrides the mapping's.
+    - `require_sensor`: refuse a log whose sensor neither names; without, such a log
+      is labelled `unnamed` (a lumped fit needs no model of the sensor).
 
     **Returns:** a :class:`BarometerLog` (not yet checked: :func:`check_log` does that).
     """
@@ -164,7 +166,7 @@ def apply_mapping(table_columns: dict, mapping, source: str, *, sensor: str | No
     if not isinstance(mapping, ColumnMapping):
         mapping = check_mapping(mapping)
     document = mapping.document
-    sensor = sensor or document.get("sensor")
+    sensor = sensor or document.get("sensor") or (None if require_sensor else "unnamed")
     if sensor is None:
         raise HydrotactError(f"{source}: which sensor is this log from? Give one in the mapping ({mapping.source}: sensor) or pass --sensor")
     spec = sensor_spec(sensor, source)

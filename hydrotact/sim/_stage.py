@@ -35,7 +35,6 @@ from ._log import simulate_log
 from ._model import make_sensor_model
 from ._trajectory import make_trajectory
 
-
 FINGERTIP_SENSOR = Path(__file__).parent / "data" / "fingertip4.json"
 """The stand-in's fingertip: the sphere8 elastomer with 4 barometers on risers just
 under the pressed area (a sensor JSON file; see its description)."""

@@ -20,14 +20,15 @@ import dataclasses
 import json
 from pathlib import Path
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._errors import HydrotactError
 from ..data import estimate_noise, read_material
 from ..visco import Prony
-from ._lumped import PressData, calc_bases, calc_depths
-from ._press_fit import DRIFT_KNOT_S, drift_basis, find_clipped
+from ._lumped import POWERS, PressData, calc_bases, calc_depths
+from ._press_fit import DRIFT_KNOT_S, drift_basis, find_clipped, find_kinks, upper_limit
 from ._presses import SITE_TOLERANCE, find_log_presses
 from ._problem import _file_digest
 
@@ -134,12 +135,14 @@ def _solve_baseline(basis, observed, residual_free, used):
     return coefficients
 
 
-def compare_log(document, report, log, source, *, tare="no-load", drift=None, report_message=None) -> Comparison:
+def compare_log(document, report, log, source, *, tare="no-load", drift=None, saturation_pa=None, report_message=None) -> Comparison:
     """Predict one log from a fit (see the module's docstring)."""
     say = report_message or (lambda message: None)
     law = document["channel_law"]
     tare = parse_tare(tare) if isinstance(tare, str) else tare
-    channels = tuple(law["exponents"])
+    channels = tuple(law["channels"])
+    if tuple(law["powers"]) != tuple(POWERS):
+        raise HydrotactError(f"channel_law: powers {law['powers']} are not this version's {list(POWERS)}; refit with this hydrotact")
     missing = [name for name in channels if name not in log.columns]
     if missing:
         raise HydrotactError(f"{source}: no channel {missing[0]!r} of the fit (the log has {', '.join(log.metadata['channels'])})")
@@ -166,7 +169,8 @@ def compare_log(document, report, log, source, *, tare="no-load", drift=None, re
         site_ids = site_ids[keep]
     observed = np.column_stack([np.asarray(log.columns[name], dtype=np.float64) for name in channels])
     times = np.asarray(log.times, dtype=np.float64)
-    mask = ~find_clipped(observed)
+    travel = np.asarray(log.columns[law["indentation"]], dtype=np.float64)
+    mask = ~find_clipped(observed, upper_limit(log, source, saturation_pa)) & ~find_kinks(times, travel)[:, None]
     for start, end in zip(presses.starts[~keep], presses.ends[~keep]):
         mask[start:end] = False
     kept = dataclasses.replace(presses, starts=presses.starts[keep], ends=presses.ends[keep], sites=presses.sites[keep], unseen=presses.unseen[keep])
@@ -175,10 +179,10 @@ def compare_log(document, report, log, source, *, tare="no-load", drift=None, re
         jnp.asarray(times - times[0]), jnp.asarray(log.columns[law["indentation"]], dtype=jnp.float64), jnp.asarray(press),
         jnp.asarray(site_ids), jnp.zeros(observed.shape), jnp.ones(observed.shape), jnp.zeros((len(times), 1)), len(sites),
     )
-    exponents = jnp.asarray([float(law["exponents"][name]["value"]) for name in channels])
-    bases = np.asarray(calc_bases(_law_prony(document), exponents, calc_depths(data, jnp.asarray(onsets), lag), data))  # (T, C, S)
-    amplitudes = np.array([[site["amplitudes_Pa"][name] for site in sites] for name in channels])  # (C, S)
-    elastic = np.einsum("tcs,cs->tc", bases, amplitudes)
+    depths = calc_depths(data, jnp.asarray(onsets), lag)
+    bases = np.asarray(calc_bases(_law_prony(document), depths, data))  # (T, S, J)
+    amplitudes = np.array([[site["amplitudes_Pa"][name] for site in sites] for name in channels], dtype=np.float64)  # (C, S, J)
+    elastic = np.where(np.asarray(depths > 0.0)[:, None], np.maximum(np.einsum("tsj,csj->tc", bases, amplitudes), 0.0), 0.0)
     if isinstance(tare, tuple):
         first = times - times[0] <= tare[1]
         baseline = np.broadcast_to(np.mean(np.where(mask & first[:, None], observed, np.nan), axis=0)[None, :], observed.shape)
@@ -190,7 +194,6 @@ def compare_log(document, report, log, source, *, tare="no-load", drift=None, re
         baseline = basis @ _solve_baseline(basis, observed, elastic, used)
     predicted = baseline + elastic
     hold = np.full(len(times), -1)
-    travel = np.asarray(log.columns[law["indentation"]], dtype=np.float64)
     for p, (start, end) in enumerate(zip(kept.starts, kept.ends)):
         deepest = travel[start:end].max()
         hold[start:end][travel[start:end] >= deepest - HOLD_TOLERANCE] = p
@@ -207,3 +210,47 @@ def compare_log(document, report, log, source, *, tare="no-load", drift=None, re
         source=source, channels=channels, times=times, observed=observed, predicted=predicted, mask=mask, hold=hold, rms_pa=rms, r2=r2,
         hold_shape_rms_pa=np.sqrt(np.nanmean(shaped**2, axis=0)), noise_pa=estimate_noise(observed),
     )
+
+
+def compare_fit(fit_dir, paths, output, *, mapping=None, tare="no-load", report_warning=None, plot=None) -> dict:
+    """Compare held-out logs with a lumped fit's prediction and write, into
+    `output`: `compare.json` (per log and channel: RMS, R², hold-shape RMS, noise),
+    `NAME_predicted.parquet` per log (time, each channel, and its prediction as
+    `<channel>_predicted`, 0/1 `<channel>_compared`), and with `plot(comparisons,
+    output) -> {name: path}` pictures. Everything is read and checked before
+    anything is written. Returns the report (with `files`)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from .. import __version__
+    from .._files import atomic_path, write_text_atomic
+    from ._fit_logs import read_logs
+
+    output = Path(output)
+    if output.exists() and not output.is_dir():
+        raise HydrotactError(f"{output}: exists and is not a folder; -o names the folder compare writes into")
+    tare = parse_tare(tare)
+    document, report = read_fit(fit_dir)
+    logs = read_logs([Path(p) for p in paths], mapping, None, report_warning, require_sensor=False)
+    drift = (report or {}).get("drift")
+    with jax.enable_x64(True):
+        comparisons = [compare_log(document, report, log, str(path), tare=tare, drift=drift, report_message=report_warning) for log, path in zip(logs, paths)]
+    output.mkdir(parents=True, exist_ok=True)
+    files = {}
+    for comparison, path in zip(comparisons, paths):
+        columns = {"time": comparison.times}
+        for c, name in enumerate(comparison.channels):
+            columns[name] = comparison.observed[:, c]
+            columns[f"{name}_predicted"] = comparison.predicted[:, c]
+            columns[f"{name}_compared"] = comparison.mask[:, c].astype(np.int8)
+        target = output / f"{Path(path).stem}_predicted.parquet"
+        with atomic_path(target) as tmp:
+            pq.write_table(pa.table(columns), tmp)
+        files[f"{Path(path).stem}_predicted"] = str(target)
+    if plot is not None:
+        files.update(plot(comparisons, output))
+    result = {"generator": f"hydrotact {__version__}", "fit": str(fit_dir), "tare": tare if isinstance(tare, str) else f"first:{tare[1]:g}", "logs": [c.to_json() for c in comparisons]}
+    files["report"] = str(output / "compare.json")
+    result["files"] = files
+    write_text_atomic(files["report"], json.dumps(result, indent=2) + "\n")
+    return result

@@ -31,26 +31,34 @@ def parse_terms(text) -> int | str:
     return value
 
 
-def read_logs(paths, mapping=None, sensor=None, report_warning=None):
-    """Read and check every log first (one error line, nothing written)."""
+def read_logs(paths, mapping=None, sensor=None, report_warning=None, require_sensor: bool = True):
+    """Read and check every log first (one error line, nothing written). Warnings
+    that repeat across the logs (uneven sampling, say) are reported once, with the
+    number of logs and the first one named."""
     if not paths:
         raise HydrotactError("no logs given")
-    logs = []
+    logs, seen = [], {}
     for path in paths:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", LogWarning)
-            logs.append(read_log(path, mapping, sensor=sensor))
+            logs.append(read_log(path, mapping, sensor=sensor, require_sensor=require_sensor))
         for warning in caught:
             if issubclass(warning.category, LogWarning) and report_warning is not None:
-                report_warning(str(warning.message))
+                message = str(warning.message)
+                kind = message.removeprefix(f"{path}: ").split(":")[0].split("(")[0].strip()
+                seen.setdefault(kind, {}).setdefault(str(path), message)
             else:
                 warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
+    for by_log in seen.values():
+        messages = list(by_log.values())
+        others = f" (and {len(messages) - 1} more logs alike)" if len(messages) > 1 else ""
+        report_warning(messages[0] + others)
     return logs
 
 
 def fit_logs(
     paths, output, *, sensor=None, lumped=False, indentation="indentation", mapping=None, terms="auto", solver=None, tare=False,
-    field=None, num_rays=None, progress=True, report_warning=None, plot=None,
+    field=None, num_rays=None, progress=True, report_warning=None, plot=None, press_options=None,
 ) -> dict:
     """Fit the logs at `paths` and write material.json, report.json (and, with `plot`,
     the pictures) into `output`. With `tare`, each log is first tared on its no-load
@@ -58,8 +66,10 @@ def fit_logs(
     which takes out the slow drift of aged sensors that constant offsets cannot.
     `plot(result, output) -> {name: path}` draws the pictures (the command line passes
     `hydrotact.viz.plot_fit`; the stage draws nothing itself). `solver` is a solver
-    object (default: Levenberg–Marquardt) or the name of one of SOLVERS. Returns the
-    report (with `files`)."""
+    object (default: Levenberg–Marquardt) or the name of one of SOLVERS. A `lumped`
+    fit is the press model of :func:`fit_press_logs` (`press_options` its keyword
+    arguments: position_columns, drift, lag, estimate_lag, saturation_pa, threshold,
+    max_steps); `plot` then draws a PressFit. Returns the report (with `files`)."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     output = Path(output)
@@ -69,6 +79,8 @@ def fit_logs(
         solver = make_solver(solver or "lm")
     name = solver_name(solver)
     terms = parse_terms(terms)
+    if lumped:
+        return _fit_press_files(paths, output, sensor, indentation, mapping, terms, solver, tare, report_warning, plot, press_options or {})
     logs = read_logs([Path(p) for p in paths], mapping, sensor, report_warning)
     if tare:
         logs = [tare_log(log, source=str(path))[0] for log, path in zip(logs, paths)]
@@ -88,3 +100,16 @@ def fit_logs(
             report_warning(message)
     report = write_fit_outputs(result, output, paths=[str(p) for p in paths], plot=plot)
     return report
+
+
+def _fit_press_files(paths, output, sensor, indentation, mapping, terms, solver, tare, report_warning, plot, options) -> dict:
+    from ._press_fit import MAX_TERMS, fit_press_logs
+    from ._press_report import write_press_fit_outputs
+
+    if tare:
+        raise HydrotactError("--tare: a lumped fit fits each channel's drifting baseline itself (--drift); leave --tare out")
+    if terms != "auto" and terms > MAX_TERMS:
+        raise HydrotactError(f"--terms: a lumped fit takes 0 to {MAX_TERMS} Prony terms or auto, got {terms}")
+    logs = read_logs([Path(p) for p in paths], mapping, sensor, report_warning, require_sensor=False)
+    fit = fit_press_logs(logs, [str(p) for p in paths], terms=terms, indentation=indentation, solver=solver, report=report_warning, **options)
+    return write_press_fit_outputs(fit, output, paths=[str(p) for p in paths], plot=plot)

@@ -51,6 +51,7 @@ RESPONSE_SNR = 20.0  # a channel responds to a press when it moves this many noi
 CHI_SQUARE_WARNING = 4.0  # a reduced χ² above this: the model misses the data
 MAX_TERMS = 3  # Prony terms the lumped model tries with terms="auto"
 FLAT_TOP_SAMPLES = 3  # a channel's maximum held this many times is its clip level
+KINK_FRACTION = 0.3  # a change of the stage's speed above this of its top speed is a kink
 
 
 def drift_basis(times, drift) -> np.ndarray:
@@ -83,6 +84,15 @@ def parse_drift(text):
     return value
 
 
+def upper_limit(log, source, saturation_pa=None):
+    """The reading limit of a log's channels: `saturation_pa` when given, else its
+    part's upper limit for absolute readings of a known sensor, else None."""
+    if saturation_pa is not None:
+        return float(saturation_pa)
+    spec = sensor_spec(log.metadata["sensor"], source) if log.metadata.get("sensor") else None
+    return float(spec.part.range_pa[1]) if spec is not None and log.metadata.get("pressure") == "absolute" else None
+
+
 def find_clipped(observed, upper=None, lower=None) -> np.ndarray:
     """(T, C) samples a barometer clipped: at or beyond the part's limits (when
     known), or at a channel's maximum (minimum) where that value repeats at least
@@ -98,6 +108,28 @@ def find_clipped(observed, upper=None, lower=None) -> np.ndarray:
         flat = at.sum(axis=0) >= FLAT_TOP_SAMPLES
         clipped |= at & flat[None, :]
     return clipped
+
+
+def find_kinks(times, travel, reach: int = 1) -> np.ndarray:
+    """(T,) samples within `reach` samples of a kink in the travel (where a ramp starts
+    or ends: the stage's speed changes by more than KINK_FRACTION of its top speed).
+    Between two samples of a log the stage's path is unknown; across a kink, the
+    travel a lagged pressure saw (interpolated between the samples) is off by up to a
+    quarter of a step's travel — at 1 mm/s and 16 Hz, 15 um or tens of Pa. Such
+    samples are masked."""
+    times, travel = np.asarray(times, dtype=np.float64), np.asarray(travel, dtype=np.float64)
+    if len(travel) < 3:
+        return np.zeros(len(travel), dtype=bool)
+    speed = np.diff(travel) / np.maximum(np.diff(times), 1e-12)
+    top = np.percentile(np.abs(speed), 99)
+    kink = np.zeros(len(travel), dtype=bool)
+    if top > 0.0:
+        kink[1:-1] = np.abs(np.diff(speed)) > KINK_FRACTION * top
+    near = kink.copy()
+    for shift in range(1, reach + 1):
+        near[shift:] |= kink[:-shift]
+        near[:-shift] |= kink[shift:]
+    return near
 
 
 @dataclasses.dataclass(frozen=True)
@@ -192,7 +224,7 @@ class Parameter:
     note: str = ""
 
     def to_json(self) -> dict:
-        out = {"value": self.value, "std": self.std, "identified": self.identified}
+        out = {"value": float(self.value), "std": float(self.std), "identified": bool(self.identified)}
         if self.note:
             out["note"] = self.note
         return out
@@ -320,10 +352,8 @@ def prepare_press_logs(
     staged = []
     responding = np.zeros(len(channels), dtype=bool)
     for log, source, presses, site_ids in prepared:
-        spec = sensor_spec(log.metadata.get("sensor", ""), source) if log.metadata.get("sensor") else None
-        upper = saturation_pa if saturation_pa is not None else (float(spec.part.range_pa[1]) if spec is not None and log.metadata.get("pressure") == "absolute" else None)
         observed = np.asarray(log.channels, dtype=np.float64)
-        clipped = find_clipped(observed, upper)
+        clipped = find_clipped(observed, upper_limit(log, source, saturation_pa))
         noise = estimate_noise(observed)
         log_responding = _responses(observed, np.asarray(log.columns[indentation], dtype=np.float64), presses, noise).max(axis=0, initial=0.0) > RESPONSE_SNR
         responding |= log_responding
@@ -343,7 +373,7 @@ def prepare_press_logs(
             continue
         times = np.asarray(log.times, dtype=np.float64)
         travel = np.asarray(log.columns[indentation], dtype=np.float64)
-        mask = ~clipped[:, fitted]
+        mask = ~clipped[:, fitted] & ~find_kinks(times, travel)[:, None]
         for start, end in zip(presses.starts[presses.unseen], presses.ends[presses.unseen]):
             mask[start:end] = False
         seen = dataclasses.replace(presses, starts=presses.starts[~presses.unseen], ends=presses.ends[~presses.unseen], sites=presses.sites[~presses.unseen], unseen=presses.unseen[~presses.unseen])
@@ -497,7 +527,7 @@ def _summarise(layout, datas, args, solution, chi_square, logs, channels, sites,
         messages.append(f"the {solver_name(solver)} solver stopped before converging ({int(solution.num_steps)} steps; raise --max-steps); the numbers are its last iterate")
     reduced = chi_square / dof
     if reduced > CHI_SQUARE_WARNING:
-        messages.append(f"reduced χ² {reduced:.3g}: the model misses the data by more than their noise (RMS residual {math.sqrt(reduced):.2g} noise stds); check the drift setting, the lag and the masks")
+        messages.append(f"reduced χ² {reduced:.3g}: the model misses the data by more than their noise (RMS residual {math.sqrt(reduced):.2g} noise stds); check the drift, the lag and the masks")
     unidentified = [f"τ{i + 1}" for i, t in enumerate(taus) if not t.identified] + [f"E{i + 1}/E∞" for i, r in enumerate(ratios) if not r.identified]
     unidentified += [f"lag of {log.source}" for log, lag in zip(logs, lag_params) if not lag.identified]
     if unidentified:

@@ -9,7 +9,7 @@ import numpy as np
 from .. import __version__
 from .._files import write_text_atomic
 from ..data import make_material_document, write_material
-from ._lumped import DEPTH_SCALE
+from ._lumped import DEPTH_SCALE, POWERS
 from ._press_fit import PressFit
 from ._problem import _file_digest
 
@@ -47,14 +47,15 @@ def channel_law(fit: PressFit) -> dict:
         sites.append({
             "position_m": [float(v) for v in position] if np.all(np.isfinite(position)) else [],
             "onset_m": float(fit.site_onsets[s]),
-            "amplitudes_Pa": {name: float(fit.amplitudes[c, s]) for c, name in enumerate(fit.channels)},
+            "amplitudes_Pa": {name: [float(v) for v in fit.amplitudes[c, s]] for c, name in enumerate(fit.channels)},
         })
     return {
         "indentation": fit.indentation,
         "position_columns": list(fit.position_columns),
         "depth_scale_m": DEPTH_SCALE,
         "lag_s": float(np.mean([lag.value for lag in fit.lags])),
-        "exponents": {name: {"value": e.value, "std": e.std} for name, e in fit.exponents.items()},
+        "powers": list(POWERS),
+        "channels": list(fit.channels),
         "sites": sites,
     }
 
@@ -95,10 +96,10 @@ def make_press_report(fit: PressFit) -> dict:
         "modulus_scale": "relative",
         "drift": fit.drift,
         "prony_terms": [{"ratio": r.to_json(), "tau_s": t.to_json()} for r, t in zip(fit.ratios, fit.taus)],
-        "exponents": {name: e.to_json() for name, e in fit.exponents.items()},
         "logs": [
             {
                 "source": log.source,
+                **({"sha256": _file_digest(log.source)} if _file_digest(log.source) else {}),
                 "lag_s": lag.to_json(),
                 "presses": [
                     {"site": int(site), "onset_m": float(onset), "onset_std_m": float(std)}

@@ -3,6 +3,8 @@
 from ._fit import plot_fit as plot_fit
 from ._plots import plot_log as plot_log
 from ._plots import save_figure as save_figure
+from ._press import plot_comparisons as plot_comparisons
+from ._press import plot_press_fit as plot_press_fit
 from ._render import render_contact as render_contact
 from ._render import render_field as render_field
 from ._render import render_mesh as render_mesh

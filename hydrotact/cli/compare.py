@@ -1,0 +1,41 @@
+"""`hydrotact compare`: predict held-out stage logs from a lumped fit (everything but
+each log's baseline fixed) and report how close the prediction comes."""
+
+import json
+import sys
+from pathlib import Path
+
+
+def add_parser(subparsers):
+    parser = subparsers.add_parser("compare", help="predict held-out logs from a lumped fit and compare (RMS, R², hold shape)")
+    parser.add_argument("fit_dir", type=Path, metavar="FITDIR", help="the folder `hydrotact fit --lumped` wrote (its material.json carries the channel law)")
+    parser.add_argument("logs", nargs="+", type=Path, metavar="LOG", help="stage logs of the same sensor and stage (.parquet, or .csv with its .json or a --mapping)")
+    parser.add_argument("--mapping", type=Path, metavar="MAP.json", help="column mapping for logs of your own layout")
+    parser.add_argument(
+        "--tare", default="no-load", metavar="no-load|first:S|all",
+        help="each log's baseline: fitted to its samples between presses (default), the mean of its first S seconds, or fitted to all samples (the fit's own)",
+    )
+    parser.add_argument("-o", "--output", required=True, type=Path, metavar="DIR", help="folder for compare.json, the predicted logs and plots")
+    parser.add_argument("--json", action="store_true", help="print the report as JSON")
+    return parser
+
+
+def run(args) -> None:
+    from ..sysid import compare_fit
+    from ..viz import plot_comparisons
+
+    report = compare_fit(args.fit_dir, args.logs, args.output, mapping=args.mapping, tare=args.tare, report_warning=_warn, plot=plot_comparisons)
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return
+    for entry in report["logs"]:
+        print(f"{entry['source']}:")
+        for name, c in entry["channels"].items():
+            print(f"  {name}: RMS {c['rms_Pa']:.3g} Pa (noise {c['noise_Pa']:.2g} Pa), R² {c['r2']:.5f}, hold shape RMS {c['hold_shape_rms_Pa']:.3g} Pa")
+    print(f"hydrotact compare: results in {args.output}/")
+    for path in report["files"].values():
+        print(f"  {path}")
+
+
+def _warn(message: str) -> None:
+    print(f"hydrotact: warning: {message}", file=sys.stderr)

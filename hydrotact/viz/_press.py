@@ -1,0 +1,162 @@
+"""Plots of a lumped press fit and of comparisons with held-out logs, readable for one
+log or a hundred: one panel per channel with every press overlaid (time from the
+press's start, the baseline taken off), each channel in one colour across all plots
+and named in a legend; residual histograms over their whole range.
+
+- `traces.png`: measured (dots) and fitted (lines) presses, per channel;
+- `residuals.png`: residuals in noise units against the time in the press, and their
+  histogram against N(0, 1);
+- `relaxation.png`: the fitted E(t)/E∞ with a 95 % band from the standard errors.
+"""
+
+from pathlib import Path
+
+import numpy as np
+
+from ._plots import save_figure
+
+MAX_CHANNEL_PANELS = 8
+
+
+def _colour(c: int) -> str:
+    return f"C{c % 10}"
+
+
+def _press_panels(channels, series, path, title, ylabel="elastic part [Pa]") -> None:
+    """One panel per channel: for each (channel, press) series (t, observed,
+    predicted), observed as dots and predicted as a line."""
+    import matplotlib.pyplot as plt
+
+    shown = list(channels)[:MAX_CHANNEL_PANELS]
+    figure, axes = plt.subplots(len(shown), 1, figsize=(9, 2.4 * len(shown) + 0.6), squeeze=False, sharex=True)
+    for c, (axis, name) in enumerate(zip(axes[:, 0], shown)):
+        for times, observed, predicted in series[c]:
+            axis.plot(times, observed, ".", ms=1.5, color=_colour(c), alpha=0.35)
+            axis.plot(times, predicted, "-", lw=0.7, color="k", alpha=0.6)
+        axis.plot([], [], ".", color=_colour(c), label=f"{name} measured")
+        axis.plot([], [], "-", color="k", label="model")
+        axis.set_ylabel(ylabel, fontsize=8)
+        axis.legend(loc="upper right", fontsize=7)
+    axes[0, 0].set_title(title, fontsize=9)
+    axes[-1, 0].set_xlabel("time from the press's start [s]")
+    if len(channels) > len(shown):
+        figure.text(0.01, 0.005, f"{len(channels) - len(shown)} more channels in the report", fontsize=7)
+    figure.tight_layout()
+    save_figure(figure, path)
+
+
+def _residual_panels(channels, residuals, path, title) -> None:
+    """Residuals/σ against the time in the press per channel, and histograms."""
+    import matplotlib.pyplot as plt
+
+    figure, (left, right) = plt.subplots(1, 2, figsize=(11, 3.8), gridspec_kw={"width_ratios": [3, 2]})
+    everything = []
+    for c, name in enumerate(channels):
+        times = np.concatenate([t for t, _ in residuals[c]]) if residuals[c] else np.zeros(0)
+        values = np.concatenate([r for _, r in residuals[c]]) if residuals[c] else np.zeros(0)
+        left.plot(times, values, ".", ms=1.0, alpha=0.4, color=_colour(c), label=name)
+        everything.append(values)
+    left.set_xlabel("time from the press's start [s]")
+    left.set_ylabel("residual / noise σ")
+    left.set_title(title, fontsize=9)
+    left.legend(fontsize=7, markerscale=6, ncol=2)
+    values = np.concatenate(everything) if everything else np.zeros(0)
+    values = values[np.isfinite(values)]
+    if values.size:
+        low, high = min(values.min(), -4.0), max(values.max(), 4.0)  # the whole range: nothing clipped
+        bins = np.linspace(low, high, 81)
+        for c, (name, channel_values) in enumerate(zip(channels, everything)):
+            channel_values = channel_values[np.isfinite(channel_values)]
+            if channel_values.size:
+                right.hist(channel_values, bins=bins, density=True, histtype="step", color=_colour(c), label=name)
+        grid = np.linspace(low, high, 400)
+        right.plot(grid, np.exp(-0.5 * grid**2) / np.sqrt(2 * np.pi), "k--", lw=1.0, label="N(0, 1)")
+        right.set_yscale("log")
+        right.set_ylim(bottom=1e-5)
+        right.set_xlabel("residual / noise σ")
+        right.legend(fontsize=7)
+    figure.tight_layout()
+    save_figure(figure, path)
+
+
+def plot_press_fit(fit, out_dir) -> dict:
+    """traces.png, residuals.png and relaxation.png of a `hydrotact.sysid.PressFit`
+    in out_dir; returns their paths (the `plot` of `write_press_fit_outputs`)."""
+    import matplotlib.pyplot as plt
+
+    out_dir = Path(out_dir)
+    paths = {"traces_png": out_dir / "traces.png", "residuals_png": out_dir / "residuals.png", "relaxation_png": out_dir / "relaxation.png"}
+    channels = list(fit.channels)
+    series = [[] for _ in channels]
+    residuals = [[] for _ in channels]
+    for log, residual, prediction in zip(fit.logs, fit.residuals, fit.predictions()):
+        baseline = prediction - _elastic_part(log, residual, prediction)
+        for p in range(len(log.onset_start)):
+            rows = np.flatnonzero(log.press == p)
+            if rows.size == 0:
+                continue
+            t = log.times[rows] - log.times[rows[0]]
+            for c in range(len(channels)):
+                used = log.mask[rows, c]
+                series[c].append((t[used], (log.observed[rows, c] - baseline[rows, c])[used], (prediction[rows, c] - baseline[rows, c])[used]))
+                residuals[c].append((t[used], residual[rows, c][used]))
+    _press_panels(channels, series, paths["traces_png"], f"{len(fit.logs)} log(s), {sum(len(log.onset_start) for log in fit.logs)} presses: measured and fitted, baseline off")
+    _residual_panels(channels, residuals, paths["residuals_png"], f"residuals (reduced χ² = {fit.reduced_chi_square:.3f})")
+
+    figure, axis = plt.subplots(figsize=(6, 3.6))
+    times = np.geomspace(1e-2, 1e3, 300)
+    ratios = np.array([r.value for r in fit.ratios])
+    taus = np.array([t.value for t in fit.taus])
+    rng = np.random.default_rng(0)
+    draws = []
+    for _ in range(400):
+        r = np.abs(ratios + rng.standard_normal(len(ratios)) * [q.std for q in fit.ratios])
+        t = np.abs(taus + rng.standard_normal(len(taus)) * [q.std for q in fit.taus])
+        draws.append(1.0 + (r[None, :] * np.exp(-times[:, None] / np.maximum(t[None, :], 1e-12))).sum(axis=1))
+    axis.fill_between(times, *np.percentile(draws, [2.5, 97.5], axis=0), color="C0", alpha=0.25, label="95 % band")
+    axis.semilogx(times, 1.0 + (ratios[None, :] * np.exp(-times[:, None] / taus[None, :])).sum(axis=1), "C0", label="fitted")
+    axis.set_xlabel("t [s]")
+    axis.set_ylabel("E(t) / E∞")
+    axis.set_title("relaxation shape (lumped fit: the scale is not identified)", fontsize=9)
+    axis.legend(fontsize=8)
+    figure.tight_layout()
+    save_figure(figure, paths["relaxation_png"])
+    return {name: str(path) for name, path in paths.items()}
+
+
+def _elastic_part(log, residual, prediction):
+    """(T, C) the model's elastic part: the prediction less its baseline, which is
+    the prediction between presses (interpolated across them)."""
+    between = log.press < 0
+    elastic = np.zeros_like(prediction)
+    if between.sum() < 2:
+        return elastic
+    for c in range(prediction.shape[1]):
+        baseline = np.interp(log.times, log.times[between], prediction[between, c])
+        elastic[:, c] = prediction[:, c] - baseline
+    return elastic
+
+
+def plot_comparisons(comparisons, out_dir) -> dict:
+    """compare_traces.png and compare_residuals.png of `hydrotact.sysid.Comparison`s
+    (the `plot` of `compare_fit`)."""
+    out_dir = Path(out_dir)
+    paths = {"traces_png": out_dir / "compare_traces.png", "residuals_png": out_dir / "compare_residuals.png"}
+    channels = list(comparisons[0].channels)
+    series = [[] for _ in channels]
+    residuals = [[] for _ in channels]
+    for comparison in comparisons:
+        holds = comparison.hold
+        for p in np.unique(holds[holds >= 0]):
+            rows = np.flatnonzero(holds == p)
+            start = max(rows[0] - 40, 0)
+            rows = np.arange(start, min(rows[-1] + 40, len(holds)))
+            t = comparison.times[rows] - comparison.times[rows[0]]
+            for c in range(len(channels)):
+                used = comparison.mask[rows, c]
+                base = comparison.predicted[rows[0], c]
+                series[c].append((t[used], comparison.observed[rows, c][used] - base, comparison.predicted[rows, c][used] - base))
+                residuals[c].append((t[used], ((comparison.observed - comparison.predicted)[rows, c] / comparison.noise_pa[c])[used]))
+    _press_panels(channels, series, paths["traces_png"], f"{len(comparisons)} held-out log(s): measured and predicted", ylabel="reading − baseline [Pa]")
+    _residual_panels(channels, residuals, paths["residuals_png"], "prediction errors")
+    return {name: str(path) for name, path in paths.items()}
