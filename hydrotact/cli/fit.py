@@ -44,7 +44,7 @@ def add_parser(subparsers):
         "--press-threshold", type=number, default=0.05, metavar="F",
         help="--lumped: a press is where the travel is above its rest level by this fraction of its range (default 0.05)",
     )
-    parser.add_argument("--max-steps", type=int, default=400, metavar="N", help="solver steps before it stops (default 400)")
+    parser.add_argument("--max-steps", type=int, metavar="N", help="solver steps before it stops (default 400; the minimisers 4000)")
     parser.add_argument("--mapping", type=Path, metavar="MAP.json", help="column mapping for logs of your own layout")
     parser.add_argument("--terms", default="auto", metavar="N|auto", help="Prony terms, or auto (lowest BIC over 0-4; default)")
     parser.add_argument("--solver", default="lm", choices=["lm", "gn", "dogleg", "bfgs", "lbfgsb"], help="lm (Levenberg-Marquardt, default), gn, dogleg, bfgs or lbfgsb (jaxopt, bounded)")
@@ -64,12 +64,12 @@ def run(args) -> None:
     if args.lumped:
         press_options = {
             "position_columns": tuple(name for name in args.position_columns.split(",") if name), "drift": parse_drift(args.drift), "lag": args.lag,
-            "estimate_lag": args.estimate_lag, "saturation_pa": args.saturation, "threshold": args.press_threshold, "max_steps": args.max_steps,
+            "estimate_lag": args.estimate_lag, "saturation_pa": args.saturation, "threshold": args.press_threshold,
         }
     report = fit_logs(
         args.logs, args.output, sensor=args.sensor, lumped=args.lumped, indentation=args.indentation, mapping=args.mapping,
         terms=args.terms, solver=args.solver, tare=args.tare, field=args.field, num_rays=args.rays, progress=not args.json,
-        report_warning=_warn, plot=plot_press_fit if args.lumped else plot_fit, press_options=press_options,
+        report_warning=_warn, plot=plot_press_fit if args.lumped else plot_fit, press_options=press_options, max_steps=args.max_steps,
     )
     if args.json:
         print(json.dumps(report, indent=2))

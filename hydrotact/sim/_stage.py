@@ -40,6 +40,9 @@ FINGERTIP_SENSOR = Path(__file__).parent / "data" / "fingertip4.json"
 under the pressed area (a sensor JSON file; see its description)."""
 
 
+DRIFT_PERIOD_S = 300.0  # s: the drift's slow wave has a period of 0.5-1.5 x this, or of the log if longer
+
+
 def make_site_grid(rows: int = 4, cols: int = 5, pitch: float = 1e-3, center=(0.0, 0.0)) -> np.ndarray:
     """(rows * cols, 2) stage positions (m) on a grid `pitch` apart, row by row."""
     y, x = np.meshgrid((np.arange(rows) - (rows - 1) / 2) * pitch, (np.arange(cols) - (cols - 1) / 2) * pitch, indexing="ij")
@@ -64,9 +67,9 @@ class StageSession:
     `gap_range` s with no samples; `lag_s` how far the pressures lag the logged stage.
 
     **The barometers**: `noise_rms` Pa; `drift_range` each channel's baseline drift
-    over the file (a linear trend plus a slow wave), Pa; `overload` a channel whose
-    baseline sits so near the part's upper limit that its presses clip there (None:
-    none); `silent` channels that do not respond; `seed` of every draw.
+    over the file (a linear trend plus a slow wave of a period of minutes), Pa;
+    `overload` a channel whose baseline sits so near the part's upper limit that its
+    largest press clips there, 40 % of its rise past the limit (None: none); `silent` channels that do not respond; `seed` of every draw.
     """
 
     sites: tuple = ()
@@ -232,15 +235,15 @@ def simulate_stage_log(
     observed = baseline + observed + session.noise_rms * rng.standard_normal(observed.shape)
     span = clock[-1] - clock[0]
     amplitude = rng.uniform(*session.drift_range, size=len(channels)) * rng.choice([-1.0, 1.0], size=len(channels))
-    period = rng.uniform(0.5, 1.5, size=len(channels)) * span
+    period = rng.uniform(0.5, 1.5, size=len(channels)) * max(span, DRIFT_PERIOD_S)  # thermal drifts take minutes, however long the log
     phase = rng.uniform(0.0, 2 * np.pi, size=len(channels))
     fraction = (clock - clock[0])[:, None] / span
     drift = amplitude * (0.7 * fraction + 0.3 * np.sin(2 * np.pi * (clock - clock[0])[:, None] / period + phase) - 0.3 * np.sin(phase))
     observed = observed + drift
     upper = float(spec.part.range_pa[1])
-    if session.overload is not None:  # the limit at 60 % of its largest press above its baseline
+    if session.overload is not None:  # the highest reading 40 % of the largest press's rise past the limit
         c = channels.index(session.overload)
-        shift = upper - float(np.max(baseline[c] + drift[:, c])) - 0.6 * rises[c]
+        shift = upper - float(np.max(observed[:, c])) + 0.4 * rises[c]
         observed[:, c] += shift
         baseline[c] += shift
     clipped = observed >= upper
@@ -252,6 +255,7 @@ def simulate_stage_log(
     metadata = {key: value for key, value in log.metadata.items() if key not in ("barometer", "field", "num_rays")}
     metadata["rate_hz"] = float(session.rate_hz)
     metadata["probe"] = probe_spec
+    metadata["pressure"] = "absolute"
     truth = {
         "presses": presses,
         "sites": sites,

@@ -58,7 +58,7 @@ def read_logs(paths, mapping=None, sensor=None, report_warning=None, require_sen
 
 def fit_logs(
     paths, output, *, sensor=None, lumped=False, indentation="indentation", mapping=None, terms="auto", solver=None, tare=False,
-    field=None, num_rays=None, progress=True, report_warning=None, plot=None, press_options=None,
+    field=None, num_rays=None, progress=True, report_warning=None, plot=None, press_options=None, max_steps=None,
 ) -> dict:
     """Fit the logs at `paths` and write material.json, report.json (and, with `plot`,
     the pictures) into `output`. With `tare`, each log is first tared on its no-load
@@ -68,8 +68,8 @@ def fit_logs(
     `hydrotact.viz.plot_fit`; the stage draws nothing itself). `solver` is a solver
     object (default: Levenberg–Marquardt) or the name of one of SOLVERS. A `lumped`
     fit is the press model of :func:`fit_press_logs` (`press_options` its keyword
-    arguments: position_columns, drift, lag, estimate_lag, saturation_pa, threshold,
-    max_steps); `plot` then draws a PressFit. Returns the report (with `files`)."""
+    arguments: position_columns, drift, lag, estimate_lag, saturation_pa, threshold);
+    `plot` then draws a PressFit. `max_steps` caps the solver's steps. Returns the report (with `files`)."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     output = Path(output)
@@ -80,7 +80,8 @@ def fit_logs(
     name = solver_name(solver)
     terms = parse_terms(terms)
     if lumped:
-        return _fit_press_files(paths, output, sensor, indentation, mapping, terms, solver, tare, report_warning, plot, press_options or {})
+        options = dict(press_options or {}, **({"max_steps": max_steps} if max_steps is not None else {}))
+        return _fit_press_files(paths, output, sensor, indentation, mapping, terms, solver, tare, report_warning, plot, options)
     logs = read_logs([Path(p) for p in paths], mapping, sensor, report_warning)
     if tare:
         logs = [tare_log(log, source=str(path))[0] for log, path in zip(logs, paths)]
@@ -90,12 +91,12 @@ def fit_logs(
     with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} fits"), TimeElapsedColumn(), transient=True, disable=not progress) as bar:
         task = bar.add_task(f"fitting ({name})", total=len(counts))
         if terms == "auto":
-            result = fit_auto(problem, solver, progress=lambda k: bar.update(task, advance=1, description=f"fitting ({name}): {k} terms done"))
+            result = fit_auto(problem, solver, progress=lambda k: bar.update(task, advance=1, description=f"fitting ({name}): {k} terms done"), max_steps=max_steps)
         else:
-            result = fit_problem(problem, terms, solver)
+            result = fit_problem(problem, terms, solver, max_steps=max_steps)
             bar.update(task, advance=1)
     if not result.converged:
-        message = f"the {name} solver stopped before converging ({result.num_steps} steps); the numbers below are its last iterate"
+        message = f"the {name} solver stopped before converging ({result.num_steps} steps; raise --max-steps); the numbers below are its last iterate"
         if report_warning is not None:
             report_warning(message)
     report = write_fit_outputs(result, output, paths=[str(p) for p in paths], plot=plot)

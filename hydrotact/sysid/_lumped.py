@@ -173,9 +173,10 @@ def calc_press_residuals(shape: Prony, onsets, lags, datas):
     num_channels = datas[0].observed.shape[1]
     contact = [jnp.broadcast_to(touching[:, None], (touching.shape[0], num_channels)) for _, touching in pieces]
     actives = contact
+    frozen = [jax.lax.stop_gradient(basis) for basis in bases]  # the set is piecewise constant: no tangents through these passes
     for _ in range(ACTIVE_PASSES):
-        _, amplitudes, _ = solve_linear(bases, datas, actives)
-        actives = [jax.lax.stop_gradient(touching & (jnp.einsum("tsj,csj->tc", basis, amplitudes) > 0.0)) for basis, touching in zip(bases, contact)]
+        _, amplitudes, _ = solve_linear(frozen, datas, actives)
+        actives = [touching & (jnp.einsum("tsj,csj->tc", basis, amplitudes) > 0.0) for basis, touching in zip(frozen, contact)]
     drifts, amplitudes, residuals = solve_linear(bases, datas, actives)
     return residuals, drifts, amplitudes
 

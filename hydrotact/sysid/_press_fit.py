@@ -7,7 +7,7 @@ indentation column, the site in position columns) and fits, jointly over the log
 - shared: the relaxation shape (Eᵢ/E∞, τᵢ) and each channel's elastic law at each
   site (amplitudes of powers of the depth, see :mod:`hydrotact.sysid._lumped`) —
   sites are stage positions, matched across logs;
-- per log: each press's contact onset (within ±0.3 mm of its first estimate), the
+- per log: each press's contact onset (within ±0.5 mm of its first estimate), the
   lag of the pressures behind the stage (given, or estimated with `estimate_lag`),
   and each channel's baseline (a constant, a line, or cubic B-splines with knots
   `drift` seconds apart: real baselines drift by kPa within a file).
@@ -26,6 +26,7 @@ value is *not identified* — its value is the solver's last word, not a measure
 
 import dataclasses
 import math
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -161,21 +162,28 @@ class PressLog:
         )
 
 
+def _level(values) -> np.ndarray:
+    """(C,) the median of rows of values with NaN where masked (NaN where all are)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # an all-masked column: NaN, counted as no response
+        return np.nanmedian(values, axis=0)
+
+
 def _responses(observed, travel, presses, noise) -> np.ndarray:
     """(P, C) each press's step in each channel, in noise stds: the level at the
     start of the hold (the first samples within 5 % of the press's deepest travel)
     against the line through the levels just before and just after the press (the
-    baseline drifts: over a 20 s hold by more than a far channel's step). Presses
-    that began in a gap count 0."""
+    baseline drifts: over a 20 s hold by more than a far channel's step). `observed`
+    holds NaN where masked. Presses that began in a gap count 0."""
     out = np.zeros((presses.num_presses, observed.shape[1]))
     for p, (start, end) in enumerate(zip(presses.starts, presses.ends)):
         if presses.unseen[p]:
             continue
-        before = np.median(observed[max(start - 3, 0) : max(start, 1)], axis=0)
-        after = np.median(observed[min(end, len(observed) - 1) : end + 3], axis=0)
-        deep = start + np.flatnonzero(travel[start:end] >= travel[start] + 0.95 * (np.max(travel[start:end]) - travel[start]))[:3]
+        before = _level(observed[max(start - 4, 0) : max(start, 1)])
+        after = _level(observed[min(end, len(observed) - 1) : end + 4])
+        deep = start + np.flatnonzero(travel[start:end] >= travel[start] + 0.95 * (np.max(travel[start:end]) - travel[start]))[:4]
         fraction = (np.mean(deep) - (start - 1)) / max(end - start + 1, 1)
-        out[p] = np.abs(np.median(observed[deep], axis=0) - (before + fraction * (after - before))) / noise
+        out[p] = np.nan_to_num(np.abs(_level(observed[deep]) - (before + fraction * (after - before))) / noise, nan=0.0)
     return out
 
 
@@ -353,11 +361,14 @@ def prepare_press_logs(
     responding = np.zeros(len(channels), dtype=bool)
     for log, source, presses, site_ids in prepared:
         observed = np.asarray(log.channels, dtype=np.float64)
+        travel = np.asarray(log.columns[indentation], dtype=np.float64)
         clipped = find_clipped(observed, upper_limit(log, source, saturation_pa))
-        noise = estimate_noise(observed)
-        log_responding = _responses(observed, np.asarray(log.columns[indentation], dtype=np.float64), presses, noise).max(axis=0, initial=0.0) > RESPONSE_SNR
+        masked = clipped | find_kinks(log.times, travel)[:, None]
+        noise = np.array([estimate_noise(observed[~masked[:, c], c : c + 1])[0] for c in range(observed.shape[1])])
+        usable = np.where(masked, np.nan, observed)
+        log_responding = _responses(usable, travel, presses, noise).max(axis=0, initial=0.0) > RESPONSE_SNR
         responding |= log_responding
-        staged.append((log, source, presses, site_ids, observed, clipped, noise, log_responding))
+        staged.append((log, source, presses, site_ids, observed, clipped, masked, noise, log_responding))
     for c, name in enumerate(channels):
         if not responding[c]:
             skipped[name] = f"channel {name!r} moves less than {RESPONSE_SNR:g} noise stds in every press: not fitted"
@@ -366,14 +377,14 @@ def prepare_press_logs(
         raise HydrotactError("no channel responds to the presses in any log (each moves less than " f"{RESPONSE_SNR:g} noise stds): nothing to fit")
     fitted = np.flatnonzero(responding)
     out = []
-    for log, source, presses, site_ids, observed, clipped, noise, log_responding in staged:
+    for log, source, presses, site_ids, observed, clipped, masked, noise, log_responding in staged:
         if not log_responding[fitted].any():
             skipped[source] = f"no channel responds to its presses (each moves less than {RESPONSE_SNR:g} noise stds)"
             report(f"{source}: skipped: {skipped[source]}")
             continue
         times = np.asarray(log.times, dtype=np.float64)
         travel = np.asarray(log.columns[indentation], dtype=np.float64)
-        mask = ~clipped[:, fitted] & ~find_kinks(times, travel)[:, None]
+        mask = ~masked[:, fitted]
         for start, end in zip(presses.starts[presses.unseen], presses.ends[presses.unseen]):
             mask[start:end] = False
         seen = dataclasses.replace(presses, starts=presses.starts[~presses.unseen], ends=presses.ends[~presses.unseen], sites=presses.sites[~presses.unseen], unseen=presses.unseen[~presses.unseen])

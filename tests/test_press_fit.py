@@ -1,0 +1,153 @@
+"""Fitting stage logs with the lumped press model, on the stage-log stand-in
+(hydrotact.sim.simulate_stage_log: the fingertip4 sensor pressed at a grid of sites
+by a stage at ~16 Hz with jitter, a gap, unknown onsets, 0.05 s lag, drift, a
+clipped channel and a dead one), and comparing a fit with held-out logs.
+
+Smoke size: 2 x 3 sites. The calibration logs share their poses (one depth past
+the onset everywhere), as do the held-out ones, so each set is simulated once and
+the unit-response cache serves the rest."""
+
+import json
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from hydrotact import HydrotactError
+from hydrotact.cli import main
+from hydrotact.data import write_log
+from hydrotact.sim import FINGERTIP_SENSOR, StageSession, make_site_grid, simulate_stage_log
+from hydrotact.sysid import compare_fit, fit_press_logs, write_press_fit_outputs
+from hydrotact.visco import Prony
+
+MATERIAL = Prony(jnp.asarray(150e3), jnp.asarray([18e3, 22e3]), jnp.asarray([0.5, 5.0]))
+PROBE = "sphere:r=2mm,subdivisions=2"
+SITES = tuple(map(tuple, make_site_grid(2, 3, pitch=1e-3)))
+CALIBRATION = dict(sites=SITES, depth_range=(0.6e-3, 0.6e-3), hold_range=(5.0, 10.0), rest_range=(0.1, 2.0), lead=2.0, gap_range=(4.0, 5.0), home_spread=0.0, overload="f0", silent=("f3",))
+HELD_OUT = dict(CALIBRATION, depth_range=(0.35e-3, 0.35e-3), hold_range=(12.0, 16.0), speed=0.5e-3)
+
+
+def _session(settings, seed):
+    return StageSession(**settings, seed=seed)
+
+
+@pytest.fixture(scope="module")
+def stand_in(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("stage_logs")
+    logs = {}
+    for name, settings, seeds in (("calibration", CALIBRATION, (1, 2, 3)), ("held_out", HELD_OUT, (4, 5, 6))):
+        for seed in seeds:
+            log, truth = simulate_stage_log(str(FINGERTIP_SENSOR), PROBE, MATERIAL, _session(settings, seed), num_rays=16)
+            path = folder / f"{name}{seed}.parquet"
+            write_log(path, log)
+            logs.setdefault(name, []).append((path, log, truth))
+    return logs
+
+
+@pytest.fixture(scope="module")
+def one_log_fit(stand_in):
+    path, log, truth = stand_in["calibration"][0]
+    messages = []
+    fit = fit_press_logs([log], [str(path)], terms=2, estimate_lag=True, report=messages.append)
+    return fit, truth, messages
+
+
+def _true_onsets(fit, log_index, truth):
+    log = fit.logs[log_index]
+    sites = fit.sites[log.press_site]
+    index = [int(np.argmin(np.abs(truth["sites"] - position).sum(axis=1))) for position in sites]
+    return np.array([[p["onset_travel_m"] for p in truth["presses"] if p["site"] == s][0] for s in index])
+
+
+def test_one_log_recovers_the_shape_onsets_and_lag(one_log_fit):
+    fit, truth, messages = one_log_fit
+    assert fit.converged and 0.8 < fit.reduced_chi_square < 1.25
+    ratios = np.asarray(MATERIAL.moduli) / float(MATERIAL.long_term_modulus)
+    for k in range(2):
+        assert fit.taus[k].identified and fit.ratios[k].identified
+        assert abs(fit.taus[k].value - float(MATERIAL.taus[k])) < 3 * fit.taus[k].std
+        assert abs(fit.ratios[k].value - ratios[k]) < 3 * fit.ratios[k].std
+    step = float(np.median(np.diff(fit.logs[0].times)))
+    assert abs(fit.lags[0].value - truth["lag_s"]) < step / 4
+    speed = 1e-3  # m/s: within a sample of the approach
+    np.testing.assert_allclose(fit.onsets[0], _true_onsets(fit, 0, truth), atol=speed * step)
+    assert fit.channels == ("f0", "f1", "f2")  # f3 is dead
+    assert any("f3" in message and "not fitted" in message for message in messages)
+    assert any("clipped" in message and "f0" in message for message in messages)
+
+
+def test_masked_samples_change_nothing(one_log_fit, stand_in):
+    """Perturb every sample the fit masked (clipped, at stage kinks): same fit."""
+    fit, _, _ = one_log_fit
+    path, log, _ = stand_in["calibration"][0]
+    masked = ~fit.logs[0].mask
+    assert masked.any()
+    columns = dict(log.columns)
+    for c, name in enumerate(fit.channels):
+        columns[name] = np.where(masked[:, c], columns[name] + 5e3 * np.random.default_rng(c).random(len(masked)), columns[name])
+    changed = type(log)(metadata=log.metadata, columns=columns)
+    again = fit_press_logs([changed], [str(path)], terms=2, estimate_lag=True)
+    np.testing.assert_array_equal(again.logs[0].mask, fit.logs[0].mask)
+    assert abs(again.taus[1].value - fit.taus[1].value) < 1e-6 * fit.taus[1].value
+
+
+def test_calibrate_on_three_and_compare_three(stand_in, tmp_path):
+    calibration = stand_in["calibration"]
+    fit = fit_press_logs([log for _, log, _ in calibration], [str(path) for path, _, _ in calibration], terms=2, estimate_lag=True)
+    assert fit.converged and fit.reduced_chi_square < 1.3
+    report = write_press_fit_outputs(fit, tmp_path / "fit", paths=[str(path) for path, _, _ in calibration])
+    material = json.loads((tmp_path / "fit" / "material.json").read_text())
+    assert material["modulus_scale"] == "relative" and material["channel_law"]["channels"] == ["f0", "f1", "f2"]
+    assert len(material["channel_law"]["sites"]) == len(SITES)
+    held_out = [path for path, _, _ in stand_in["held_out"]]
+    result = compare_fit(tmp_path / "fit", held_out, tmp_path / "compare")
+    for entry in result["logs"]:
+        for name, channel in entry["channels"].items():
+            # Within the noise: a prediction error the size of the readings' noise.
+            assert channel["rms_Pa"] < 1.5 * channel["noise_Pa"], (entry["source"], name, channel)
+            assert channel["r2"] > 0.999
+    # On the fit's own logs, with the baseline the fit found, the fit's residuals.
+    own = compare_fit(tmp_path / "fit", [calibration[0][0]], tmp_path / "own", tare="all")
+    fitted = report["residuals"][0]["channels"]
+    for name, channel in own["logs"][0]["channels"].items():
+        assert channel["rms_Pa"] == pytest.approx(fitted[name]["rms_Pa"], rel=1e-6)
+
+
+def test_fit_and_compare_from_the_command_line(stand_in, tmp_path, capsys):
+    path = stand_in["calibration"][1][0]
+    code = main(["fit", str(path), "--lumped", "--terms", "2", "--estimate-lag", "-o", str(tmp_path / "fit")])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert "τ2" in out and "reduced χ²" in out and "f3" in err
+    for name in ("material.json", "report.json", "traces.png", "residuals.png", "relaxation.png"):
+        assert (tmp_path / "fit" / name).is_file()
+    code = main(["compare", str(tmp_path / "fit"), str(stand_in["held_out"][0][0]), "-o", str(tmp_path / "compare")])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert "hold shape RMS" in out and (tmp_path / "compare" / "compare.json").is_file()
+    assert (tmp_path / "compare" / "compare_traces.png").is_file()
+
+
+def test_parameters_the_logs_cannot_identify_are_flagged(stand_in):
+    """Three terms on a log whose holds are 5-10 s: at least one is not identified,
+    and it says so instead of printing it as exact."""
+    path, log, _ = stand_in["calibration"][0]
+    messages = []
+    fit = fit_press_logs([log], [str(path)], terms=3, estimate_lag=True, report=messages.append)
+    flagged = [t for t in fit.taus if not t.identified] + [r for r in fit.ratios if not r.identified]
+    assert flagged and any("not identified" in message for message in messages)
+
+
+def test_a_log_that_does_not_respond_is_skipped(stand_in):
+    path, log, _ = stand_in["calibration"][0]
+    flat = dict(log.columns)
+    rng = np.random.default_rng(0)
+    for name in log.metadata["channels"]:
+        flat[name] = 101325.0 + 2.0 * rng.standard_normal(log.num_samples)
+    messages = []
+    other_path, other, _ = stand_in["calibration"][1]
+    fit = fit_press_logs([type(log)(metadata=log.metadata, columns=flat), other], ["flat.parquet", str(other_path)], terms=2, report=messages.append)
+    assert "flat.parquet" in fit.skipped and len(fit.logs) == 1
+    assert any("flat.parquet: skipped" in message for message in messages)
+    with pytest.raises(HydrotactError, match="no channel responds"):
+        fit_press_logs([type(log)(metadata=log.metadata, columns=flat)], ["flat.parquet"], terms=2)
