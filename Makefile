@@ -32,7 +32,7 @@ demo: $(VENV)/.installed
 # non-zero status, and any failing file fails the run (and is named at the end).
 TEST_JOBS ?= 2
 TEST_LOGS := .pytest-logs
-TEST_FIRST := tests/test_contact.py tests/test_taxel.py tests/test_forward_model.py tests/test_notebooks_and_experiments.py
+TEST_FIRST := tests/test_contact.py tests/test_taxel.py tests/test_forward_model.py tests/test_notebooks_and_experiments.py tests/test_press_fit.py
 TEST_FILES := $(TEST_FIRST) $(filter-out $(TEST_FIRST),$(sort $(wildcard tests/test_*.py)))
 
 test: $(VENV)/.installed-test

@@ -85,7 +85,7 @@ def test_lumped_fit_of_a_parquet_log(tmp_path, capsys, lumped_parquet):
     assert "Traceback" not in err and "error" not in err
     report = _check_lumped_outputs(output, None)
     # The printed table: every parameter with its value.
-    for label in ("E1/E∞", "τ1", "E2/E∞", "τ2", "reduced χ²"):
+    for label in ("E1/E∞", "τ1", "E2/E∞", "τ2"):
         assert label in out, (label, out)
     for term in report["prony_terms"]:
         assert f"{term['tau_s']['value']:.6g}" in out, out

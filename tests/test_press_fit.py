@@ -23,7 +23,11 @@ from hydrotact.visco import Prony
 MATERIAL = Prony(jnp.asarray(150e3), jnp.asarray([18e3, 22e3]), jnp.asarray([0.5, 5.0]))
 PROBE = "sphere:r=2mm,subdivisions=2"
 SITES = tuple(map(tuple, make_site_grid(2, 3, pitch=1e-3)))
-CALIBRATION = dict(sites=SITES, depth_range=(0.6e-3, 0.6e-3), hold_range=(5.0, 10.0), rest_range=(0.1, 2.0), lead=2.0, gap_range=(4.0, 5.0), home_spread=0.0, overload="f0", silent=("f3",))
+# Drift of 100-600 Pa over these ~100 s logs: the rates (up to ~6 Pa/s) of kPa over a real file.
+CALIBRATION = dict(
+    sites=SITES, depth_range=(0.6e-3, 0.6e-3), hold_range=(5.0, 10.0), rest_range=(0.1, 2.0), lead=2.0, gap_range=(4.0, 5.0), drift_range=(100.0, 600.0),
+    home_spread=0.0, overload="f0", silent=("f3",),
+)
 HELD_OUT = dict(CALIBRATION, depth_range=(0.35e-3, 0.35e-3), hold_range=(12.0, 16.0), speed=0.5e-3)
 
 
@@ -48,7 +52,7 @@ def stand_in(tmp_path_factory):
 def one_log_fit(stand_in):
     path, log, truth = stand_in["calibration"][0]
     messages = []
-    fit = fit_press_logs([log], [str(path)], terms=2, estimate_lag=True, report=messages.append)
+    fit = fit_press_logs([log], [str(path)], terms=2, estimate_lag=True, saturation_pa=125e3, report=messages.append)
     return fit, truth, messages
 
 
@@ -69,8 +73,12 @@ def test_one_log_recovers_the_shape_onsets_and_lag(one_log_fit):
         assert abs(fit.ratios[k].value - ratios[k]) < 3 * fit.ratios[k].std
     step = float(np.median(np.diff(fit.logs[0].times)))
     assert abs(fit.lags[0].value - truth["lag_s"]) < step / 4
-    speed = 1e-3  # m/s: within a sample of the approach
-    np.testing.assert_allclose(fit.onsets[0], _true_onsets(fit, 0, truth), atol=speed * step)
+    # The onsets against the geometric first touch: within a sample of the approach
+    # (1 mm/s) for most presses. A press between the barometers' receptive fields
+    # reads nothing until its patch grows into one (on the stand-in up to 0.4 mm
+    # later): the law's onset then comes later, by up to 0.3 mm.
+    error = np.abs(fit.onsets[0] - _true_onsets(fit, 0, truth))
+    assert np.median(error) < 1e-3 * step and error.max() < 0.3e-3, error
     assert fit.channels == ("f0", "f1", "f2")  # f3 is dead
     assert any("f3" in message and "not fitted" in message for message in messages)
     assert any("clipped" in message and "f0" in message for message in messages)
@@ -86,7 +94,9 @@ def test_masked_samples_change_nothing(one_log_fit, stand_in):
     for c, name in enumerate(fit.channels):
         columns[name] = np.where(masked[:, c], columns[name] + 5e3 * np.random.default_rng(c).random(len(masked)), columns[name])
     changed = type(log)(metadata=log.metadata, columns=columns)
-    again = fit_press_logs([changed], [str(path)], terms=2, estimate_lag=True)
+    # Clipped readings pushed further up stay at or above the part's limit (the
+    # stand-in's sensor is not a built-in one: give the limit).
+    again = fit_press_logs([changed], [str(path)], terms=2, estimate_lag=True, saturation_pa=125e3)
     np.testing.assert_array_equal(again.logs[0].mask, fit.logs[0].mask)
     assert abs(again.taus[1].value - fit.taus[1].value) < 1e-6 * fit.taus[1].value
 
@@ -100,14 +110,16 @@ def test_calibrate_on_three_and_compare_three(stand_in, tmp_path):
     assert material["modulus_scale"] == "relative" and material["channel_law"]["channels"] == ["f0", "f1", "f2"]
     assert len(material["channel_law"]["sites"]) == len(SITES)
     held_out = [path for path, _, _ in stand_in["held_out"]]
-    result = compare_fit(tmp_path / "fit", held_out, tmp_path / "compare")
+    messages = []
+    result = compare_fit(tmp_path / "fit", held_out, tmp_path / "compare", report_warning=messages.append)
+    assert any("uneven sampling" in message for message in messages)
     for entry in result["logs"]:
         for name, channel in entry["channels"].items():
             # Within the noise: a prediction error the size of the readings' noise.
             assert channel["rms_Pa"] < 1.5 * channel["noise_Pa"], (entry["source"], name, channel)
             assert channel["r2"] > 0.999
     # On the fit's own logs, with the baseline the fit found, the fit's residuals.
-    own = compare_fit(tmp_path / "fit", [calibration[0][0]], tmp_path / "own", tare="all")
+    own = compare_fit(tmp_path / "fit", [calibration[0][0]], tmp_path / "own", tare="all", report_warning=messages.append)
     fitted = report["residuals"][0]["channels"]
     for name, channel in own["logs"][0]["channels"].items():
         assert channel["rms_Pa"] == pytest.approx(fitted[name]["rms_Pa"], rel=1e-6)
@@ -118,7 +130,7 @@ def test_fit_and_compare_from_the_command_line(stand_in, tmp_path, capsys):
     code = main(["fit", str(path), "--lumped", "--terms", "2", "--estimate-lag", "-o", str(tmp_path / "fit")])
     out, err = capsys.readouterr()
     assert code == 0, err
-    assert "τ2" in out and "reduced χ²" in out and "f3" in err
+    assert "τ2" in out and "E2/E∞" in out and "f3" in err
     for name in ("material.json", "report.json", "traces.png", "residuals.png", "relaxation.png"):
         assert (tmp_path / "fit" / name).is_file()
     code = main(["compare", str(tmp_path / "fit"), str(stand_in["held_out"][0][0]), "-o", str(tmp_path / "compare")])

@@ -21,7 +21,7 @@ SESSION = StageSession(
     rest_range=(0.2, 1.0),
     lead=2.0,
     gap_range=(3.0, 4.0),
-    overload="b1",
+    overload="b0",
     silent=("b7",),
     seed=5,
 )
@@ -69,7 +69,7 @@ def test_lag_clipping_silence_and_drift(stage_log):
     readings = log.channels
     upper = 125000.0  # BMP388
     clipped = truth["clipped"]
-    assert clipped[:, channels.index("b1")].sum() > 3 and clipped.sum() == clipped[:, channels.index("b1")].sum()
+    assert clipped[:, channels.index("b0")].sum() > 3 and clipped.sum() == clipped[:, channels.index("b0")].sum()
     np.testing.assert_array_equal(readings[clipped], upper)
     assert np.all(readings[~clipped] < upper)
     # The silent channel is its baseline, drift and noise only.

@@ -31,10 +31,14 @@ def run(args) -> None:
     for entry in report["logs"]:
         print(f"{entry['source']}:")
         for name, c in entry["channels"].items():
-            print(f"  {name}: RMS {c['rms_Pa']:.3g} Pa (noise {c['noise_Pa']:.2g} Pa), R² {c['r2']:.5f}, hold shape RMS {c['hold_shape_rms_Pa']:.3g} Pa")
+            print(f"  {name}: RMS {_fmt(c['rms_Pa'])} Pa (noise {_fmt(c['noise_Pa'])} Pa), R² {_fmt(c['r2'], '.5f')}, hold shape RMS {_fmt(c['hold_shape_rms_Pa'])} Pa")
     print(f"hydrotact compare: results in {args.output}/")
     for path in report["files"].values():
         print(f"  {path}")
+
+
+def _fmt(value, spec: str = ".3g") -> str:
+    return "n/a" if value is None else format(value, spec)
 
 
 def _warn(message: str) -> None:

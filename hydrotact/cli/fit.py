@@ -73,10 +73,11 @@ def run(args) -> None:
     )
     if args.json:
         print(json.dumps(report, indent=2))
-    elif args.lumped:
-        print_press_table(report)
     else:
-        print_fit_table(report)
+        if args.lumped:
+            print_press_table(report)
+        else:
+            print_fit_table(report)
         print(f"hydrotact fit: results in {args.output}/")
         for path in report["files"].values():
             print(f"  {path}")

@@ -18,6 +18,7 @@ For a log the fit used (the same SHA-256), the fit's own onsets and lag for that
 
 import dataclasses
 import json
+import warnings
 from pathlib import Path
 
 import jax
@@ -59,10 +60,17 @@ class Comparison:
         return {
             "source": self.source,
             "channels": {
-                name: {"rms_Pa": float(self.rms_pa[c]), "r2": float(self.r2[c]), "hold_shape_rms_Pa": float(self.hold_shape_rms_pa[c]), "noise_Pa": float(self.noise_pa[c])}
+                name: {
+                    "rms_Pa": _number(self.rms_pa[c]), "r2": _number(self.r2[c]), "hold_shape_rms_Pa": _number(self.hold_shape_rms_pa[c]), "noise_Pa": _number(self.noise_pa[c]),
+                }
                 for c, name in enumerate(self.channels)
             },
         }
+
+
+def _number(value):
+    """A float for JSON, None where there is no number (a channel masked throughout)."""
+    return float(value) if np.isfinite(value) else None
 
 
 def parse_tare(text):
@@ -197,18 +205,21 @@ def compare_log(document, report, log, source, *, tare="no-load", drift=None, sa
     for p, (start, end) in enumerate(zip(kept.starts, kept.ends)):
         deepest = travel[start:end].max()
         hold[start:end][travel[start:end] >= deepest - HOLD_TOLERANCE] = p
-    error = np.where(mask, observed - predicted, np.nan)
-    rms = np.sqrt(np.nanmean(error**2, axis=0))
-    spread = np.nansum((np.where(mask, observed, np.nan) - np.nanmean(np.where(mask, observed, np.nan), axis=0)) ** 2, axis=0)
-    r2 = 1.0 - np.nansum(error**2, axis=0) / np.maximum(spread, 1e-300)
-    shaped = np.full(error.shape, np.nan)
-    for p in range(kept.num_presses):
-        rows = hold == p
-        if rows.sum() > 1:
-            shaped[rows] = error[rows] - np.nanmean(error[rows], axis=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a channel clipped through a whole hold: NaN there, None in JSON
+        error = np.where(mask, observed - predicted, np.nan)
+        rms = np.sqrt(np.nanmean(error**2, axis=0))
+        spread = np.nansum((np.where(mask, observed, np.nan) - np.nanmean(np.where(mask, observed, np.nan), axis=0)) ** 2, axis=0)
+        r2 = 1.0 - np.nansum(error**2, axis=0) / np.maximum(spread, 1e-300)
+        shaped = np.full(error.shape, np.nan)
+        for p in range(kept.num_presses):
+            rows = hold == p
+            if rows.sum() > 1:
+                shaped[rows] = error[rows] - np.nanmean(error[rows], axis=0)
+        hold_shape = np.sqrt(np.nanmean(shaped**2, axis=0))
     return Comparison(
         source=source, channels=channels, times=times, observed=observed, predicted=predicted, mask=mask, hold=hold, rms_pa=rms, r2=r2,
-        hold_shape_rms_pa=np.sqrt(np.nanmean(shaped**2, axis=0)), noise_pa=estimate_noise(observed),
+        hold_shape_rms_pa=hold_shape, noise_pa=estimate_noise(observed),
     )
 
 

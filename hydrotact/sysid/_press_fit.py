@@ -44,7 +44,7 @@ from ._lumped import (
     calc_press_residuals,
     press_residual_fn,
 )
-from ._presses import POSITION_COLUMNS, PRESS_THRESHOLD, SITE_TOLERANCE, find_log_presses
+from ._presses import GAP_FACTOR, POSITION_COLUMNS, PRESS_THRESHOLD, SITE_TOLERANCE, find_log_presses
 from ._solve import make_solver, solve_least_squares, solver_name
 
 DRIFT_KNOT_S = 30.0  # s between the baseline spline's knots: slower than any relaxation we fit
@@ -52,6 +52,7 @@ RESPONSE_SNR = 20.0  # a channel responds to a press when it moves this many noi
 CHI_SQUARE_WARNING = 4.0  # a reduced χ² above this: the model misses the data
 MAX_TERMS = 3  # Prony terms the lumped model tries with terms="auto"
 FLAT_TOP_SAMPLES = 3  # a channel's maximum held this many times is its clip level
+MIN_SAMPLES = 8  # a log shorter than this holds no press to fit
 KINK_FRACTION = 0.3  # a change of the stage's speed above this of its top speed is a kink
 
 
@@ -169,7 +170,7 @@ def _level(values) -> np.ndarray:
         return np.nanmedian(values, axis=0)
 
 
-def _responses(observed, travel, presses, noise) -> np.ndarray:
+def _responses(observed, travel, times, presses, noise) -> np.ndarray:
     """(P, C) each press's step in each channel, in noise stds: the level at the
     start of the hold (the first samples within 5 % of the press's deepest travel)
     against the line through the levels just before and just after the press (the
@@ -183,6 +184,8 @@ def _responses(observed, travel, presses, noise) -> np.ndarray:
         after = _level(observed[min(end, len(observed) - 1) : end + 4])
         deep = start + np.flatnonzero(travel[start:end] >= travel[start] + 0.95 * (np.max(travel[start:end]) - travel[start]))[:4]
         fraction = (np.mean(deep) - (start - 1)) / max(end - start + 1, 1)
+        if np.any(np.diff(times[int(deep[-1]) : end + 4]) > GAP_FACTOR * np.median(np.diff(times))):
+            fraction = 0.0  # the press's end fell into a gap: its level after is minutes of drift away
         out[p] = np.nan_to_num(np.abs(_level(observed[deep]) - (before + fraction * (after - before))) / noise, nan=0.0)
     return out
 
@@ -201,11 +204,13 @@ def _first_onsets(travel, observed, mask, presses, noise, lag, times) -> np.ndar
         deepest = start + int(np.argmax(lagged[start:end]))
         if deepest <= start:
             continue
-        before = np.median(observed[max(start - 3, 0) : max(start, 1)], axis=0)
-        rise = np.where(mask[start : deepest + 1], (observed[start : deepest + 1] - before) * np.sign(observed[deepest] - before), np.nan)
-        strongest = int(np.nanargmax(np.nanmax(np.abs(rise), axis=0) / noise)) if np.isfinite(rise).any() else 0
-        curve = rise[:, strongest]
-        step = np.nanmax(curve)
+        before = _level(np.where(mask, observed, np.nan)[max(start - 4, 0) : max(start, 1)])
+        used = mask[start : deepest + 1] & np.isfinite(before)[None, :]
+        rise = (observed[start : deepest + 1] - np.nan_to_num(before)) * np.sign(_level(np.where(used, observed[start : deepest + 1], np.nan)[-4:]) - np.nan_to_num(before))
+        rise = np.nan_to_num(rise)
+        strongest = int(np.argmax(np.max(np.where(used, np.abs(rise), 0.0), axis=0) / noise))
+        curve = np.where(used[:, strongest], rise[:, strongest], -np.inf)
+        step = np.max(curve)
         if not step > 10 * RESPONSE_SNR * noise[strongest]:
             continue
         tenth = np.flatnonzero(curve >= 0.1 * step)
@@ -323,23 +328,25 @@ def prepare_press_logs(
             raise HydrotactError(f"{source}: channels {', '.join(log.metadata['channels'])} differ from {sources[0]}'s ({', '.join(channels)}); a joint lumped fit needs logs of one sensor")
     skipped, kept = {}, []
     for log, source in zip(logs, sources):
+        if log.num_samples < MIN_SAMPLES:
+            raise HydrotactError(f"{source}: {log.num_samples} samples; a fit needs at least {MIN_SAMPLES}")
         try:
             presses = find_log_presses(log, indentation, position_columns, threshold=threshold, source=source)
         except HydrotactError as error:
             if "no indentation column" in str(error) or "stage moves" in str(error):
                 raise
             skipped[source] = str(error).removeprefix(f"{source}: ")
-            report(f"{source}: skipped: {skipped[source]}")
             continue
         if presses.unseen.all():
             skipped[source] = "every press began in a gap of the log"
-            report(f"{source}: skipped: {skipped[source]}")
             continue
         if presses.unseen.any():
             report(f"{source}: {int(presses.unseen.sum())} press(es) began in a gap of the log (loading unseen): masked")
         kept.append((log, source, presses))
     if not kept:
         raise HydrotactError("no log has a press to fit: " + "; ".join(f"{name}: {reason}" for name, reason in skipped.items()))
+    for name, reason in skipped.items():
+        report(f"{name}: skipped: {reason}")
     # Sites shared by the logs: positions within SITE_TOLERANCE are one site; a log
     # without position columns has sites of its own, one per press.
     centres, prepared = [], []
@@ -366,7 +373,7 @@ def prepare_press_logs(
         masked = clipped | find_kinks(log.times, travel)[:, None]
         noise = np.array([estimate_noise(observed[~masked[:, c], c : c + 1])[0] for c in range(observed.shape[1])])
         usable = np.where(masked, np.nan, observed)
-        log_responding = _responses(usable, travel, presses, noise).max(axis=0, initial=0.0) > RESPONSE_SNR
+        log_responding = _responses(usable, travel, np.asarray(log.times, dtype=np.float64), presses, noise).max(axis=0, initial=0.0) > RESPONSE_SNR
         responding |= log_responding
         staged.append((log, source, presses, site_ids, observed, clipped, masked, noise, log_responding))
     for c, name in enumerate(channels):
