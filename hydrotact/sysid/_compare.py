@@ -219,7 +219,7 @@ def compare_log(document, report, log, source, *, tare="no-load", drift=None, sa
         hold_shape = np.sqrt(np.nanmean(shaped**2, axis=0))
     return Comparison(
         source=source, channels=channels, times=times, observed=observed, predicted=predicted, mask=mask, hold=hold, rms_pa=rms, r2=r2,
-        hold_shape_rms_pa=hold_shape, noise_pa=estimate_noise(observed),
+        hold_shape_rms_pa=hold_shape, noise_pa=np.array([estimate_noise(observed[mask[:, c], c : c + 1])[0] for c in range(len(channels))]),
     )
 
 
