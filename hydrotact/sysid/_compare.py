@@ -1,7 +1,7 @@
 """Predicting held-out stage logs from a lumped press fit (`hydrotact compare`).
 
 Everything comes from the fit's `material.json` (the relative Prony series and the
-channel law: exponents, each site's onset and amplitudes, the lag) except each log's
+channel law: each site's onset and amplitudes per power of the depth, the lag) except each log's
 baseline, the *tare*, which comes from the log itself:
 
 - "no-load" (default): each channel's baseline fitted to the log's samples between

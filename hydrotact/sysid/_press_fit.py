@@ -296,17 +296,17 @@ def _press_durations(log: PressLog) -> np.ndarray:
     return np.array([np.ptp(log.times[log.press == p]) for p in range(len(log.onset_start))])
 
 
-def _initial_x(layout: PressLayout, logs: list[PressLog]) -> np.ndarray:
+def _initial_x(layout: PressLayout, logs: list[PressLog], lag: float = 0.0) -> np.ndarray:
     """The shape's start: the terms' τ spread log-evenly inside [4 sampling steps,
-    the median press] (the time scales a press can show), each Eᵢ/E∞ 0.05; exponents
-    onsets at their estimates; lags at 0 (or the given lag)."""
+    the median press] (the time scales a press can show), each Eᵢ/E∞ 0.05; onsets at
+    their estimates; lags at the given lag."""
     step = float(np.median(np.concatenate([np.diff(log.times) for log in logs])))
     durations = np.concatenate([_press_durations(log) for log in logs])
     k = layout.num_terms
     taus = np.geomspace(4 * step, max(float(np.median(durations)), 40 * step), k + 2)[1:-1]
     parts = [np.log(np.full(k, 0.05)), np.log(taus), np.zeros(sum(layout.num_presses))]
     if layout.estimate_lag:
-        parts.append(np.zeros(len(logs)))
+        parts.append(np.full(len(logs), math.atanh(float(lag) / LAG_BOUND)))
     return np.concatenate(parts)
 
 
@@ -423,7 +423,7 @@ def _fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps)
     layout = PressLayout(num_terms, tuple(len(log.onset_start) for log in logs), estimate_lag)
     datas = tuple(log.to_data(num_sites) for log in logs)
     args = (datas, tuple(jnp.asarray(log.onset_start) for log in logs), tuple(jnp.asarray(float(lag)) for _ in logs))
-    x0 = jnp.asarray(_initial_x(layout, logs))
+    x0 = jnp.asarray(_initial_x(layout, logs, lag))
     residual_fn = press_residual_fn(layout)
     solution = jax.jit(lambda x, a: solve_least_squares(residual_fn, x, a, solver, max_steps=max_steps, throw=False))(x0, args)
     return layout, datas, args, solution
