@@ -43,10 +43,10 @@ def _data(t, travel, press, sites, observed, noise, num_sites):
     )
 
 
-def test_projection_at_the_truth_leaves_the_noise():
-    rng = np.random.default_rng(0)
-    num_presses, num_sites, num_channels = 8, 4, 3
-    t, travel, press = _presses(rng, 2000, num_presses, 8.0)
+def _model_log(rng, num_samples, num_presses, num_sites, num_channels, hold):
+    """A log drawn from the model itself (sites in turn, lag 0.05 s, 2 Pa noise):
+    (data, onsets, amplitudes, baseline coefficients)."""
+    t, travel, press = _presses(rng, num_samples, num_presses, hold)
     sites = np.arange(num_presses) % num_sites
     onsets = rng.uniform(0.4e-3, 0.6e-3, num_presses)
     amplitudes = _amplitudes(rng, num_channels, num_sites)
@@ -54,7 +54,12 @@ def test_projection_at_the_truth_leaves_the_noise():
     baseline = rng.normal(0, 300, (num_channels, blank.baseline.shape[1])) + 101325.0
     clean = np.asarray(calc_press_predictions(SHAPE, jnp.asarray(onsets), 0.05, jnp.asarray(baseline), jnp.asarray(amplitudes), blank))
     noise = 2.0
-    data = _data(t, travel, press, sites, clean + noise * rng.standard_normal(clean.shape), noise, num_sites)
+    return _data(t, travel, press, sites, clean + noise * rng.standard_normal(clean.shape), noise, num_sites), onsets, amplitudes, baseline
+
+
+def test_projection_at_the_truth_leaves_the_noise():
+    rng = np.random.default_rng(0)
+    data, onsets, amplitudes, baseline = _model_log(rng, 2000, 8, 4, 3, 8.0)
     residuals, drifts, fitted = calc_press_residuals(SHAPE, (jnp.asarray(onsets),), (jnp.asarray(0.05),), (data,))
     assert 0.95 < float(jnp.std(residuals[0])) < 1.05
     np.testing.assert_allclose(np.asarray(drifts[0]), baseline, atol=3.0)
@@ -72,16 +77,8 @@ def test_projection_at_the_truth_leaves_the_noise():
 
 def test_the_nonlinear_fit_recovers_shape_onsets_and_lag():
     rng = np.random.default_rng(1)
-    num_presses, num_sites, num_channels = 6, 3, 2
-    t, travel, press = _presses(rng, 1600, num_presses, 10.0)
-    sites = np.arange(num_presses) % num_sites
-    onsets = rng.uniform(0.4e-3, 0.6e-3, num_presses)
-    amplitudes = _amplitudes(rng, num_channels, num_sites)
-    blank = _data(t, travel, press, sites, np.zeros((len(t), num_channels)), 1.0, num_sites)
-    baseline = rng.normal(0, 300, (num_channels, blank.baseline.shape[1])) + 101325.0
-    clean = np.asarray(calc_press_predictions(SHAPE, jnp.asarray(onsets), 0.05, jnp.asarray(baseline), jnp.asarray(amplitudes), blank))
-    noise = 2.0
-    data = _data(t, travel, press, sites, clean + noise * rng.standard_normal(clean.shape), noise, num_sites)
+    num_presses = 6
+    data, onsets, _, _ = _model_log(rng, 1600, num_presses, 3, 2, 10.0)
     layout = PressLayout(2, (num_presses,), True)
     start = jnp.asarray(onsets + rng.uniform(-80e-6, 80e-6, num_presses))
     x0 = jnp.concatenate([jnp.log(jnp.asarray([0.05, 0.05])), jnp.log(jnp.asarray([0.3, 3.0])), jnp.zeros(num_presses), jnp.zeros(1)])

@@ -1,17 +1,15 @@
 """What a lumped press fit leaves behind: `material.json` (the relative Prony series
 and the channel law that `compare` predicts with), `report.json` and plots."""
 
-import json
-from pathlib import Path
 
 import numpy as np
 
 from .. import __version__
-from .._files import write_text_atomic
-from ..data import make_material_document, write_material
+from ..data import make_material_document
 from ._lumped import DEPTH_SCALE, POWERS
 from ._press_fit import PressFit
 from ._problem import _file_digest
+from ._report import write_outputs
 
 
 def make_press_material(fit: PressFit, paths=(), name: str | None = None) -> dict:
@@ -119,13 +117,4 @@ def write_press_fit_outputs(fit: PressFit, out_dir, paths=(), plot=None) -> dict
     """material.json, report.json and, with `plot(fit, out_dir) -> {name: path}`,
     the plots in out_dir (each written atomically). Returns the report, with
     `files`."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    files = {"material": str(out_dir / "material.json"), "report": str(out_dir / "report.json")}
-    write_material(files["material"], make_press_material(fit, paths))
-    report = make_press_report(fit)
-    if plot is not None:
-        files.update(plot(fit, out_dir))
-    report["files"] = files
-    write_text_atomic(files["report"], json.dumps(report, indent=2) + "\n")
-    return report
+    return write_outputs(fit, out_dir, make_press_material(fit, paths), make_press_report(fit), plot)

@@ -148,11 +148,17 @@ def write_fit_outputs(result: FitResult, out_dir, paths=(), plot=None) -> dict:
     `hydrotact.viz.plot_fit` for traces.png, residuals.png and relaxation.png. The
     stage draws nothing itself (no stage imports `hydrotact.viz`). Returns the report,
     with `files` naming everything written."""
+    return write_outputs(result, out_dir, make_fit_material(result, paths), make_report(result), plot)
+
+
+def write_outputs(result, out_dir, material: dict, report: dict, plot=None) -> dict:
+    """Write a fit's `material` document and, with `plot(result, out_dir) -> {name:
+    path}`, its pictures into out_dir, then `report` with `files` naming everything
+    written (report.json last, each file atomically). Returns the report."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     files = {"material": str(out_dir / "material.json"), "report": str(out_dir / "report.json")}
-    write_material(files["material"], make_fit_material(result, paths))
-    report = make_report(result)
+    write_material(files["material"], material)
     if plot is not None:
         files.update(plot(result, out_dir))
     report["files"] = files
