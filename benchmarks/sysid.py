@@ -34,8 +34,12 @@ The chi-square at the true parameters is printed too: a fit that ends far above 
 found a local minimum (the timing comparison still holds when both codes reach the
 same one; the parameter errors then say how far off that minimum is).
 
+Moving-press fit (`hydrotact fit --lumped` on a stage log whose probe moves between
+presses, against scipy least_squares on the same projected model): see
+benchmarks/_press_bench.py.
+
 Run: `.venv/bin/python benchmarks/sysid.py [--minutes 10 --rate 100 --channels 8
---terms 3 --seed 0] [--smoke] [--output PATH]`.
+--terms 3 --seed 0] [--tasks log relaxation press] [--smoke] [--output PATH]`.
 """
 
 import argparse
@@ -55,6 +59,7 @@ import numpy as np  # noqa: E402
 import scipy.optimize  # noqa: E402
 import scipy.signal  # noqa: E402
 from _machine import describe_machine, write_results  # noqa: E402
+from _press_bench import bench_press_fit, print_press_table  # noqa: E402
 
 from hydrotact.data import BarometerLog  # noqa: E402
 from hydrotact.sensors import known_parts  # noqa: E402
@@ -427,6 +432,8 @@ def main(argv=None):
     parser.add_argument("--relaxation-points", type=int, default=200)
     parser.add_argument("--repeats", type=int, default=5, help="repeats of the relaxation-curve timings (median)")
     parser.add_argument("--log-repeats", type=int, default=1, help="repeats of the log fit's solve-only timing (median)")
+    parser.add_argument("--tasks", nargs="+", choices=("log", "relaxation", "press"), default=["log", "relaxation", "press"])
+    parser.add_argument("--press-max-evaluations", type=int, default=5000, help="scipy's cap on residual evaluations in the moving-press fit")
     parser.add_argument("--smoke", action="store_true", help="a tiny fast run (30 s log at 20 Hz, 3 channels, one repeat)")
     parser.add_argument("--output", type=Path, default=None, help="JSON path (default benchmarks/results/sysid-BACKEND.json; sysid-smoke-BACKEND.json with --smoke)")
     args = parser.parse_args(argv)
@@ -441,12 +448,18 @@ def main(argv=None):
     print(f"machine: {machine}", flush=True)
     config = {"task": "config", **{k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()}, "barometer_noise_pa": BAROMETER_NOISE, "force_noise_n": FORCE_NOISE}
     rows = [config]
-    log_rows, relax_rows = [], []
-    bench_log_fit(args, log_rows)
-    bench_relaxation(args, relax_rows)
-    rows += log_rows + relax_rows
+    log_rows, relax_rows, press_rows = [], [], []
+    if "log" in args.tasks:
+        bench_log_fit(args, log_rows)
+    if "relaxation" in args.tasks:
+        bench_relaxation(args, relax_rows)
+    if "press" in args.tasks:
+        bench_press_fit(args, press_rows)
+    rows += log_rows + relax_rows + press_rows
     machine["load_average_end"] = _load()
-    print_tables(log_rows + relax_rows)
+    if log_rows:
+        print_tables(log_rows + relax_rows)
+    print_press_table(press_rows)
     print(f"load average (1, 5, 15 min): start {machine['load_average_start']}, end {machine['load_average_end']}")
     if args.output is None:
         path = write_results("sysid-smoke" if args.smoke else "sysid", machine, rows)

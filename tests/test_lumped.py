@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from hydrotact.sysid._lumped import POWERS, PressData, PressLayout, calc_press_predictions, calc_press_residuals, press_residual_fn
+from hydrotact.sysid._lumped import POWERS, PressData, PressLayout, calc_press_jacobian, calc_press_predictions, calc_press_residuals, press_residual_fn
 from hydrotact.sysid._press_fit import drift_basis
 from hydrotact.sysid._solve import solve_least_squares
 from hydrotact.visco import Prony
@@ -90,3 +90,33 @@ def test_the_nonlinear_fit_recovers_shape_onsets_and_lag():
     # Onsets are the weakest: a press's first samples of contact carry them.
     np.testing.assert_allclose(np.asarray(fitted_onsets[0]), onsets, atol=0.1e-3)
     assert abs(float(lags[0]) - 0.05) < 0.005
+
+
+def test_the_hand_jacobian_is_autodiffs_through_the_projection():
+    """calc_press_jacobian (Golub-Pereyra by hand, each derivative basis integrated
+    once) against JAX's forward mode through the plain model and its LU solve, for
+    two logs (shared shape, own onsets and lags) away from the truth. They agree to
+    the projection's round-off (the powers are nearly collinear: ~1e-4 of a column's
+    largest entry); a wrong term, a lost chain factor or another log's column would
+    be off by O(1)."""
+    rng = np.random.default_rng(2)
+    logs = [_model_log(rng, 700, 4, 3, 2, 6.0), _model_log(rng, 600, 3, 3, 2, 5.0)]
+    datas = tuple(log[0] for log in logs)
+    layout = PressLayout(2, (4, 3), True)
+    starts = tuple(jnp.asarray(log[1] + rng.uniform(-50e-6, 50e-6, len(log[1]))) for log in logs)
+    args = (datas, starts, (0.0, 0.0))
+    x = jnp.asarray(np.concatenate([np.log([0.08, 0.2]), np.log([0.4, 6.0]), rng.normal(0, 0.3, 7), [0.2, 0.05]]))
+
+    def plain(x):
+        return jnp.concatenate([r.reshape(-1) for r in calc_press_residuals(*layout.unpack(x, starts, (0.0, 0.0)), datas)[0]])
+
+    value, jacobian = jax.jit(lambda x: calc_press_jacobian(layout, x, args))(x)
+    reference = jax.jit(jax.jacfwd(plain))(x)
+    np.testing.assert_allclose(np.asarray(value), np.asarray(jax.jit(plain)(x)), atol=1e-4)
+    scale = np.abs(np.asarray(reference)).max(axis=0)
+    assert np.all(scale > 0.0)
+    np.testing.assert_array_less(np.abs(np.asarray(jacobian - reference)).max(axis=0), 1e-3 * scale)
+    # The fit's residual function carries this Jacobian (its forward mode is a
+    # product with it; jit's fusions differ only in round-off).
+    carried = jax.jit(jax.jacfwd(press_residual_fn(layout)))(x, args)
+    np.testing.assert_array_less(np.abs(np.asarray(carried - jacobian)).max(axis=0), 1e-6 * scale)

@@ -73,12 +73,15 @@ def test_one_log_recovers_the_shape_onsets_and_lag(one_log_fit):
         assert abs(fit.ratios[k].value - ratios[k]) < 3 * fit.ratios[k].std
     step = float(np.median(np.diff(fit.logs[0].times)))
     assert abs(fit.lags[0].value - truth["lag_s"]) < step / 4
-    # The onsets against the geometric first touch: within a sample of the approach
-    # (1 mm/s) for most presses. A press between the barometers' receptive fields
-    # reads nothing until its patch grows into one (on the stand-in up to 0.4 mm
-    # later): the law's onset then comes later, by up to 0.3 mm.
+    # The onsets against the geometric first touch. With a law of its own per site
+    # and one press per site, a press's onset is told only by its first samples of
+    # contact, and the cost has several minima ~1 chi2 apart in the onsets: on this
+    # stand-in the fit's onsets are 20-210 um off (median ~80 um: 1-2 samples of the
+    # 1 mm/s approach), and the fit started at the true onsets ends 5 chi2 higher,
+    # 10-290 um off. A press between the barometers' receptive fields reads nothing
+    # until its patch grows into one: its law's onset comes later still.
     error = np.abs(fit.onsets[0] - _true_onsets(fit, 0, truth))
-    assert np.median(error) < 1e-3 * step and error.max() < 0.3e-3, error
+    assert np.median(error) < 2e-3 * step and error.max() < 0.3e-3, error
     assert fit.channels == ("f0", "f1", "f2")  # f3 is dead
     assert any("f3" in message and "not fitted" in message for message in messages)
     assert any("clipped" in message and "f0" in message for message in messages)

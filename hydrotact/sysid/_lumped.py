@@ -37,8 +37,8 @@ jump where δ reaches 0, and the solver stalls in the steps.
 The amplitudes A (shared by the logs) and the baselines' β (per log) enter linearly:
 for given nonlinear parameters (shape, onsets, lags) they are solved per channel by
 weighted least squares inside the residual (variable projection, Golub and Pereyra),
-so the outer solver only sees the few nonlinear parameters, and their Jacobian (by
-autodiff through the solve) is the exact one of the projected problem.
+so the outer solver only sees the few nonlinear parameters; their Jacobian, the
+exact one of the projected problem, is written by hand (:func:`calc_press_jacobian`).
 """
 
 import equinox as eqx
@@ -46,7 +46,7 @@ import jax
 import jax.numpy as jnp
 
 from .._types import Array, Float, Int
-from ..visco import Prony, calc_hereditary_integral
+from ..visco import Prony, calc_hereditary_integral, calc_kernel_responses_and_derivatives
 
 DEPTH_SCALE = 1e-3  # m: δ is measured in millimetres in the law (amplitudes in Pa at 1 mm)
 POWERS = (1.5, 2.0, 2.5, 3.0)  # the law's powers of the depth (from Hertz's 1.5 up: see the docstring)
@@ -85,12 +85,7 @@ def calc_depths(data: PressData, onsets, lag):
 def calc_bases(shape: Prony, depths, data: PressData):
     """(T, S, J) the bases B_{s,j}: the hereditary integrals of the powers of the
     depth, split by site (their memory runs on between presses)."""
-    positive = depths > 0.0
-    log_depth = jnp.log(jnp.where(positive, depths / DEPTH_SCALE, 1.0))
-    law = jnp.where(positive[:, None], jnp.exp(log_depth[:, None] * jnp.asarray(POWERS)[None, :]), 0.0)  # (T, J)
-    site = jnp.where(data.press >= 0, data.press_site[jnp.maximum(data.press, 0)], -1)
-    by_site = (site[:, None] == jnp.arange(data.num_sites)[None, :]).astype(law.dtype)  # (T, S)
-    return calc_hereditary_integral(shape, data.times, by_site[:, :, None] * law[:, None, :])
+    return calc_hereditary_integral(shape, data.times, _law_inputs(depths, data)[0])
 
 
 def _assemble(bases, datas, actives):
@@ -124,16 +119,6 @@ def _assemble(bases, datas, actives):
     return weighted, (sizes, first, num_baseline), normal, rhs
 
 
-def _project_rhs(weighted, blocks, vectors, num_channels, size, dtype):
-    """Φᵀ v for per-log vectors v (C, T_l), in the normal matrix' block layout."""
-    sizes, first, num_baseline = blocks
-    rhs = jnp.zeros((num_channels, size), dtype)
-    for k, ((drift, sites, _), vector) in enumerate(zip(weighted, vectors)):
-        rhs = rhs.at[:, first[k] : first[k] + sizes[k]].set(jnp.einsum("ctd,ct->cd", drift, vector))
-        rhs = rhs.at[:, num_baseline:].add(jnp.einsum("cts,ct->cs", sites, vector))
-    return rhs
-
-
 def _factor(normal):
     """The Jacobi-scaled, ridged normal matrix' LU factors and the scale (C, N)."""
     diagonal = jnp.diagonal(normal, axis1=1, axis2=2)  # 0 for a site no press of the logs reaches
@@ -163,7 +148,6 @@ def _split(coefficients, blocks, shape):
     return [coefficients[:, first[k] : first[k] + sizes[k]] for k in range(len(sizes))], coefficients[:, num_baseline:].reshape(shape)
 
 
-@jax.custom_jvp
 def solve_linear(bases, datas, actives):
     """The linear parameters given each log's bases: per channel, weighted least
     squares over every log's baseline coefficients and the amplitudes per site and
@@ -172,51 +156,28 @@ def solve_linear(bases, datas, actives):
     per log (T, C): where a channel's elastic part is on (elsewhere it reads its
     baseline).
 
-    Differentiated in the bases by Golub and Pereyra's variable-projection
-    derivative, da = N⁻¹ (dΦᵀ r − Φᵀ dΦ a), dr = −dΦ a − Φ da (exact for N = ΦᵀΦ;
-    the ridge is 1e-12 of it): one solve with the normal matrix' factors per
-    direction instead of differentiating the normal matrix itself, ~N times cheaper.
-
     **Returns:** (baseline coefficients per log [(C, D_l)], amplitudes (C, S, J),
     weighted residuals per log [(T_l, C)]).
     """
+    drifts, amplitudes, residuals, _ = _solve_linear(bases, datas, actives)
+    return drifts, amplitudes, residuals
+
+
+def _solve_linear(bases, datas, actives):
+    """:func:`solve_linear`, plus what its derivative reuses: (weighted columns,
+    blocks, factors, scale)."""
     weighted, blocks, normal, rhs = _assemble(bases, datas, actives)
     factors, scale = _factor(normal)
     coefficients = _apply_inverse(factors, scale, rhs)
     residuals = [(target - fitted).T for (_, _, target), fitted in zip(weighted, _fitted(weighted, blocks, coefficients))]
     drifts, amplitudes = _split(coefficients, blocks, (normal.shape[0], *bases[0].shape[1:]))
-    return drifts, amplitudes, residuals
+    return drifts, amplitudes, residuals, (weighted, blocks, factors, scale)
 
 
-@solve_linear.defjvp
-def _solve_linear_jvp(primals, tangents):
-    bases, datas, actives = primals
-    dbases = tangents[0]
-    weighted, blocks, normal, rhs = _assemble(bases, datas, actives)
-    factors, scale = _factor(normal)
-    coefficients = _apply_inverse(factors, scale, rhs)
-    residuals = [(target - fitted).T for (_, _, target), fitted in zip(weighted, _fitted(weighted, blocks, coefficients))]
-    shape = (normal.shape[0], *bases[0].shape[1:])
-    drifts, amplitudes = _split(coefficients, blocks, shape)
-    # Golub-Pereyra: with v = −dΦ a, da = N⁻¹ (Φᵀ v + dΦᵀ r) and dr = v − Φ da (only
-    # the site columns move with the bases).
-    vectors = []
-    _, _, num_baseline = blocks
-    extra = jnp.zeros((normal.shape[0], normal.shape[1] - num_baseline), normal.dtype)
-    for dbasis, data, active, residual in zip(dbases, datas, actives, residuals):
-        on = (data.weights * active).T  # (C, T)
-        vectors.append(-jnp.einsum("tsj,csj->ct", dbasis, amplitudes) * on)
-        extra = extra + jnp.einsum("tn,ct->cn", dbasis.reshape(dbasis.shape[0], -1), on * residual.T)
-    rhs = _project_rhs(weighted, blocks, vectors, normal.shape[0], normal.shape[1], normal.dtype).at[:, num_baseline:].add(extra)
-    step = _apply_inverse(factors, scale, rhs)
-    dresiduals = [(vector - fitted).T for vector, fitted in zip(vectors, _fitted(weighted, blocks, step))]
-    ddrifts, damplitudes = _split(step, blocks, shape)
-    return (drifts, amplitudes, residuals), (ddrifts, damplitudes, dresiduals)
-
-
-def _law_inputs(depths, data: PressData, powers):
-    """(T, S, J) the site-split inputs (δ/δ_ref)^p, and (T, J) their derivative in δ
-    (per m)."""
+def _law_inputs(depths, data: PressData):
+    """(T, S, J) the site-split inputs (δ/δ_ref)^p, (T, J) their derivative in δ
+    (per m), and (T, S) each sample's site."""
+    powers = jnp.asarray(POWERS)
     positive = depths > 0.0
     scaled = jnp.where(positive, depths / DEPTH_SCALE, 1.0)
     law = jnp.where(positive[:, None], scaled[:, None] ** powers[None, :], 0.0)
@@ -226,49 +187,51 @@ def _law_inputs(depths, data: PressData, powers):
     return by_site[:, :, None] * law[:, None, :], slope, by_site
 
 
-@jax.custom_jvp
-def site_bases(shape: Prony, onsets, lag, data: PressData):
-    """(T, S, J) the bases at the given shape, onsets and lag (:func:`calc_bases` of
-    :func:`calc_depths`).
+def _bases_and_derivatives(shape: Prony, onsets, lag, data: PressData, with_lag: bool):
+    """One log's bases (T, S, J) and their derivatives: in each log Eᵢ/E∞ and log τᵢ
+    (and the lag, `with_lag`), (2K [+ 1], T, S, J); in each press's own onset, (T, P,
+    J) (an onset moves only its press's depth, at that press's site).
 
-    Differentiated by hand in the onsets and the lag: an onset moves only its own
-    press's depth, so the bases' derivatives in all P onsets are the hereditary
-    integrals of P × J inputs, computed once (not once per direction, as forward
-    mode through the integral would); the lag's is one more integral. The shape's
-    derivative goes through the integral's own rule (its τ part also computed once).
+    Every derivative is a hereditary integral computed once: ∂B/∂log gᵢ = gᵢ hᵢ and
+    ∂B/∂log τᵢ = gᵢ τᵢ ∂hᵢ/∂τᵢ from the terms' responses hᵢ; ∂δ/∂onset_p = −[press
+    p] and ∂δ/∂lag = −travel'(t − lag) in contact, through the law's slope.
     """
-    return calc_bases(shape, calc_depths(data, onsets, lag), data)
-
-
-@site_bases.defjvp
-def _site_bases_jvp(primals, tangents):
-    shape, onsets, lag, data = primals
-    dshape, donsets, dlag = tangents[:3]
-    powers = jnp.asarray(POWERS)
     depths = calc_depths(data, onsets, lag)
-    inputs, slope, by_site = _law_inputs(depths, data, powers)
-    bases, dbases = jax.jvp(lambda sh: calc_hereditary_integral(sh, data.times, inputs), (shape,), (dshape,))
+    inputs, slope, by_site = _law_inputs(depths, data)
+    num_samples = inputs.shape[0]
+    values = inputs.reshape(num_samples, -1)
+    responses, derivatives = calc_kernel_responses_and_derivatives(shape.taus, data.times, values)  # (T, K, S J)
+    moduli = shape.moduli[None, :, None]
+    bases = shape.long_term_modulus * values + jnp.sum(moduli * responses, axis=1)
+    by_ratio = jnp.moveaxis(moduli * responses, 1, 0)  # (K, T, S J)
+    by_tau = jnp.moveaxis(moduli * shape.taus[None, :, None] * derivatives, 1, 0)
     press = jnp.where(depths > 0.0, data.press, -1)
     by_press = (press[:, None] == jnp.arange(onsets.shape[0])[None, :]).astype(slope.dtype)  # (T, P)
-    # ∂δ/∂onset_p = −[press p]; ∂δ/∂lag = −travel'(t − lag) where in contact.
     per_press = calc_hereditary_integral(shape, data.times, -by_press[:, :, None] * slope[:, None, :])  # (T, P, J)
-    press_site = (data.press_site[:, None] == jnp.arange(data.num_sites)[None, :]).astype(slope.dtype)  # (P, S)
-    dbases = dbases + jnp.einsum("tpj,p,ps->tsj", per_press, donsets, press_site)
-    shifted = data.times - lag
-    index = jnp.clip(jnp.searchsorted(data.times, shifted, side="right") - 1, 0, data.times.shape[0] - 2)
-    speed = (data.travel[index + 1] - data.travel[index]) / (data.times[index + 1] - data.times[index])
-    speed = jnp.where((shifted > data.times[0]) & (shifted < data.times[-1]), speed, 0.0)
-    per_lag = calc_hereditary_integral(shape, data.times, by_site[:, :, None] * (-speed[:, None] * slope)[:, None, :])  # (T, S, J)
-    return bases, dbases + per_lag * dlag
+    dense = [by_ratio, by_tau]
+    if with_lag:
+        shifted = data.times - lag
+        index = jnp.clip(jnp.searchsorted(data.times, shifted, side="right") - 1, 0, num_samples - 2)
+        speed = (data.travel[index + 1] - data.travel[index]) / (data.times[index + 1] - data.times[index])
+        speed = jnp.where((shifted > data.times[0]) & (shifted < data.times[-1]), speed, 0.0)
+        per_lag = calc_hereditary_integral(shape, data.times, by_site[:, :, None] * (-speed[:, None] * slope)[:, None, :])  # (T, S, J)
+        dense.append(per_lag.reshape(1, num_samples, -1))
+    dense = jnp.concatenate(dense, axis=0).reshape(-1, *inputs.shape)
+    return bases.reshape(inputs.shape), dense, per_press, depths > 0.0
 
 
-def _all_bases(shape, onsets, lags, datas):
-    """Per log: (the bases (T, S, J), the contact (T,))."""
-    out = []
-    for data, onset, lag in zip(datas, onsets, lags):
-        depths = calc_depths(data, onset, lag)
-        out.append((site_bases(shape, onset, jnp.asarray(lag, depths.dtype), data), depths > 0.0))
-    return out
+def _find_actives(bases, contact, datas):
+    """Per log (T, C): where each channel's elastic part is on. The amplitudes are
+    solved over the contact, then over where that solution is positive, ACTIVE_PASSES
+    times; the set is piecewise constant in the parameters (no derivative)."""
+    frozen = [jax.lax.stop_gradient(basis) for basis in bases]
+    num_channels = datas[0].observed.shape[1]
+    contact = [jnp.broadcast_to(touching[:, None], (touching.shape[0], num_channels)) for touching in contact]
+    actives = contact
+    for _ in range(ACTIVE_PASSES):
+        _, amplitudes, _ = solve_linear(frozen, datas, actives)
+        actives = [touching & (jnp.einsum("tsj,csj->tc", basis, amplitudes) > 0.0) for basis, touching in zip(frozen, contact)]
+    return actives
 
 
 def calc_press_residuals(shape: Prony, onsets, lags, datas):
@@ -287,17 +250,75 @@ def calc_press_residuals(shape: Prony, onsets, lags, datas):
     **Returns:** (residuals per log [(T_l, C)], baseline coefficients per log
     [(C, D_l)], amplitudes (C, S, J)).
     """
-    pieces = _all_bases(shape, onsets, lags, datas)
-    bases = [basis for basis, _ in pieces]
-    num_channels = datas[0].observed.shape[1]
-    contact = [jnp.broadcast_to(touching[:, None], (touching.shape[0], num_channels)) for _, touching in pieces]
-    actives = contact
-    frozen = [jax.lax.stop_gradient(basis) for basis in bases]  # the set is piecewise constant: no tangents through these passes
-    for _ in range(ACTIVE_PASSES):
-        _, amplitudes, _ = solve_linear(frozen, datas, actives)
-        actives = [touching & (jnp.einsum("tsj,csj->tc", basis, amplitudes) > 0.0) for basis, touching in zip(frozen, contact)]
-    drifts, amplitudes, residuals = solve_linear(bases, datas, actives)
+    bases, contact = [], []
+    for data, onset, lag in zip(datas, onsets, lags):
+        depths = calc_depths(data, onset, lag)
+        bases.append(calc_bases(shape, depths, data))
+        contact.append(depths > 0.0)
+    drifts, amplitudes, residuals = solve_linear(bases, datas, _find_actives(bases, contact, datas))
     return residuals, drifts, amplitudes
+
+
+def calc_press_jacobian(layout: "PressLayout", x, args, linear: bool = False):
+    """The flat weighted residuals (R,) and their Jacobian (R, M) in x, by hand
+    (with `linear`, also the linear parameters: baseline coefficients per log
+    [(C, D_l)] and amplitudes (C, S, J)).
+
+    Variable projection's derivative (Golub and Pereyra) per direction k:
+    v = −dΦ a on the active samples, da = N⁻¹ (Φᵀ v + dΦᵀ r), dr = v − Φ da (exact for
+    the normal matrix N = ΦᵀΦ; the ridge is 1e-12 of it), with one solve per
+    direction with N's factors. dΦ in the shape and the lags from
+    :func:`_bases_and_derivatives` (each a hereditary integral computed once), in an
+    onset only its own press's column: the whole Jacobian costs a few integrals and
+    M solves of the small normal matrix, not M passes of forward mode through the
+    integrals and the factorisation.
+    """
+    datas, starts, given_lags = args
+    shape, onsets, lags = layout.unpack(x, starts, given_lags)
+    k = layout.num_terms
+    pieces = [_bases_and_derivatives(shape, onset, jnp.asarray(lag, x.dtype), data, layout.estimate_lag) for data, onset, lag in zip(datas, onsets, lags)]
+    bases = [piece[0] for piece in pieces]
+    actives = _find_actives(bases, [piece[3] for piece in pieces], datas)
+    drifts, amplitudes, residuals, (weighted, blocks, factors, scale) = _solve_linear(bases, datas, actives)
+    size = layout.size
+    num_channels, num_sites, num_powers = amplitudes.shape
+    first_onset = 2 * k
+    first_lag = 2 * k + sum(layout.num_presses)
+    vectors, extra = [], jnp.zeros((size, num_channels, num_sites * num_powers), x.dtype)
+    for log, ((_, dense, per_press, _), data, active, residual) in enumerate(zip(pieces, datas, actives, residuals)):
+        on = (data.weights * active).T  # (C, T)
+        weighted_residual = on * residual.T
+        num_presses = layout.num_presses[log]
+        # chain rule through x: exp for the shape (dense already per log), tanh for onsets and lag
+        onset_x = x[first_onset : first_onset + num_presses]
+        per_press = per_press * (ONSET_HALF_RANGE * (1.0 - jnp.tanh(onset_x) ** 2))[None, :, None]
+        site_amplitudes = amplitudes[:, data.press_site, :]  # (C, P, J)
+        press_site = (data.press_site[:, None] == jnp.arange(num_sites)[None, :]).astype(x.dtype)  # (P, S)
+        vector = jnp.zeros((size, num_channels, on.shape[1]), x.dtype)
+        vector = vector.at[: 2 * k].set(-jnp.einsum("mtsj,csj->mct", dense[: 2 * k], amplitudes) * on[None])
+        extra = extra.at[: 2 * k].add(jnp.einsum("mtsj,ct->mcsj", dense[: 2 * k], weighted_residual).reshape(2 * k, num_channels, -1))
+        vector = vector.at[first_onset : first_onset + num_presses].set(-jnp.einsum("tpj,cpj->pct", per_press, site_amplitudes) * on[None])
+        by_press = jnp.einsum("tpj,ct->pcj", per_press, weighted_residual)
+        extra = extra.at[first_onset : first_onset + num_presses].add((by_press[:, :, None, :] * press_site[:, None, :, None]).reshape(num_presses, num_channels, -1))
+        if layout.estimate_lag:
+            lag_direction = dense[2 * k] * (LAG_BOUND * (1.0 - jnp.tanh(x[first_lag + log]) ** 2))
+            vector = vector.at[first_lag + log].set(-jnp.einsum("tsj,csj->ct", lag_direction, amplitudes) * on)
+            extra = extra.at[first_lag + log].add(jnp.einsum("tsj,ct->csj", lag_direction, weighted_residual).reshape(num_channels, -1))
+        vectors.append(vector)
+        first_onset += num_presses
+    sizes, first, num_baseline = blocks
+    rhs = jnp.zeros((size, num_channels, num_baseline + num_sites * num_powers), x.dtype)
+    for log, ((drift, sites, _), vector) in enumerate(zip(weighted, vectors)):
+        rhs = rhs.at[:, :, first[log] : first[log] + sizes[log]].set(jnp.einsum("ctd,mct->mcd", drift, vector))
+        rhs = rhs.at[:, :, num_baseline:].add(jnp.einsum("cts,mct->mcs", sites, vector))
+    rhs = rhs.at[:, :, num_baseline:].add(extra)
+    step = jax.vmap(_apply_inverse, in_axes=(None, None, 0))(factors, scale, rhs)  # (M, C, N)
+    columns = []
+    for log, ((drift, sites, _), vector) in enumerate(zip(weighted, vectors)):
+        fitted = jnp.einsum("ctd,mcd->mct", drift, step[:, :, first[log] : first[log] + sizes[log]]) + jnp.einsum("cts,mcs->mct", sites, step[:, :, num_baseline:])
+        columns.append(jnp.transpose(vector - fitted, (2, 1, 0)).reshape(-1, size))
+    value, jacobian = jnp.concatenate([r.reshape(-1) for r in residuals]), jnp.concatenate(columns, axis=0)
+    return (value, jacobian, drifts, amplitudes) if linear else (value, jacobian)
 
 
 def calc_press_predictions(shape: Prony, onsets, lag, baseline_coefficients, amplitudes, data: PressData):
@@ -341,11 +362,19 @@ class PressLayout(eqx.Module):
 
 
 def press_residual_fn(layout: PressLayout):
-    """x, (datas, onset_starts, lags) -> the flat weighted residuals (for optimistix)."""
+    """x, (datas, onset_starts, lags) -> the flat weighted residuals (for optimistix),
+    differentiated in x by :func:`calc_press_jacobian` (not in the data)."""
 
+    @jax.custom_jvp
     def residuals(x, args):
         datas, onset_starts, lags = args
         per_log = calc_press_residuals(*layout.unpack(x, onset_starts, lags), datas)[0]
         return jnp.concatenate([r.reshape(-1) for r in per_log])
+
+    @residuals.defjvp
+    def _residuals_jvp(primals, tangents):
+        x, args = primals
+        value, jacobian = calc_press_jacobian(layout, x, args)
+        return value, jacobian @ tangents[0]
 
     return residuals

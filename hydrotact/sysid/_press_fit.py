@@ -28,6 +28,7 @@ import dataclasses
 import math
 import warnings
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -41,7 +42,7 @@ from ._lumped import (
     POWERS,
     PressData,
     PressLayout,
-    calc_press_residuals,
+    calc_press_jacobian,
     press_residual_fn,
 )
 from ._presses import GAP_FACTOR, POSITION_COLUMNS, PRESS_THRESHOLD, SITE_TOLERANCE, find_log_presses
@@ -419,13 +420,29 @@ def _identified_time(value, std, step, span):
     return True, ""
 
 
+@eqx.filter_jit
+def _solve_press(layout, solver, max_steps, x0, args):
+    """The jitted solve (compiled once per layout, solver and step cap; reused by
+    later fits of logs of the same sizes)."""
+    return solve_least_squares(press_residual_fn(layout), x0, args, solver, max_steps=max_steps, throw=False)
+
+
+@eqx.filter_jit
+def _press_outputs(layout, x, args):
+    """At x: (the residuals per log, baselines, amplitudes) and the Jacobian."""
+    value, jacobian, drifts, amplitudes = calc_press_jacobian(layout, x, args, linear=True)
+    rows = [data.observed.size for data in args[0]]
+    pieces = jnp.split(value, [sum(rows[: k + 1]) for k in range(len(rows) - 1)])
+    residuals = [piece.reshape(data.observed.shape) for piece, data in zip(pieces, args[0])]
+    return (residuals, drifts, amplitudes), jacobian
+
+
 def _fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps):
     layout = PressLayout(num_terms, tuple(len(log.onset_start) for log in logs), estimate_lag)
     datas = tuple(log.to_data(num_sites) for log in logs)
     args = (datas, tuple(jnp.asarray(log.onset_start) for log in logs), tuple(jnp.asarray(float(lag)) for _ in logs))
     x0 = jnp.asarray(_initial_x(layout, logs, lag))
-    residual_fn = press_residual_fn(layout)
-    solution = jax.jit(lambda x, a: solve_least_squares(residual_fn, x, a, solver, max_steps=max_steps, throw=False))(x0, args)
+    solution = _solve_press(layout, solver, max_steps, x0, args)
     return layout, datas, args, solution
 
 
@@ -477,19 +494,21 @@ def _fit_press_logs(logs, sources, *, terms, indentation, position_columns, drif
     best = None
     for count in counts:
         layout, datas, args, solution = _fit_terms(count, prepared, len(sites), estimate_lag, lag, solver, max_steps)
-        residuals = press_residual_fn(layout)(solution.value, args)
-        chi_square = float(jnp.sum(residuals**2))
+        outputs = _press_outputs(layout, solution.value, args)
+        chi_square = float(sum(jnp.sum(r**2) for r in outputs[0][0]))
         bic = chi_square + (layout.size + num_linear) * math.log(num_used)
         if best is None or bic < best[0]:
-            best = (bic, count, layout, datas, args, solution, chi_square)
-    _, count, layout, datas, args, solution, chi_square = best
-    return _summarise(layout, datas, args, solution, chi_square, prepared, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, report, position_columns, indentation)
+            best = (bic, count, layout, datas, args, solution, chi_square, outputs)
+    _, count, layout, datas, args, solution, chi_square, outputs = best
+    return _summarise(layout, datas, args, solution, chi_square, outputs, prepared, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, report, position_columns, indentation)
 
 
-def _summarise(layout, datas, args, solution, chi_square, logs, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, report, position_columns, indentation) -> PressFit:
+def _summarise(
+    layout, datas, args, solution, chi_square, outputs, logs, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, report, position_columns, indentation,
+) -> PressFit:
     x = solution.value
-    residual_fn = press_residual_fn(layout)
-    jacobian = np.asarray(jax.jacfwd(residual_fn)(x, args))
+    (residuals, baselines, amplitudes), jacobian = outputs
+    jacobian = np.asarray(jacobian)
     dof = max(num_used - layout.size - num_linear, 1)
     scale = max(chi_square / dof, 1.0)
     normal = jacobian.T @ jacobian
@@ -497,7 +516,6 @@ def _summarise(layout, datas, args, solution, chi_square, logs, channels, sites,
     std_x = np.sqrt(np.maximum(np.diag(covariance), 0.0))
     x = np.asarray(x)
     shape, onsets, lags = layout.unpack(jnp.asarray(x), *args[1:])
-    residuals, baselines, amplitudes = calc_press_residuals(shape, onsets, lags, datas)
     k = layout.num_terms
     step = float(np.median(np.concatenate([np.diff(log.times) for log in logs])))
     span = max(float(log.times[-1] - log.times[0]) for log in logs)

@@ -10,6 +10,9 @@ from ._prony import (
     calc_hereditary_integral as calc_hereditary_integral,
 )
 from ._prony import (
+    calc_kernel_responses_and_derivatives as calc_kernel_responses_and_derivatives,
+)
+from ._prony import (
     make_prony as make_prony,
 )
 from ._signal import (

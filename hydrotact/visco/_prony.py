@@ -121,6 +121,22 @@ def _calc_kernel_responses(taus, times, values, method):
     return _linear_recurrence(jnp.broadcast_to(decay, drive.shape), drive, start, method)
 
 
+def calc_kernel_responses_and_derivatives(taus, times, values, method: str = "scan"):
+    """Each unit-modulus term's response gₖ = (e^{−t/τₖ} ∗ u) and its derivative
+    ∂gₖ/∂τₖ, both (T, K, C) for values (T, C).
+
+    Differentiating the update h' = a h + c Δu in τ, with x = Δ/τ:
+    ∂h'/∂τ = a ∂h/∂τ + (x a / τ) h + ((1 − e^{−x})/x − e^{−x}) Δu / τ, from ∂h/∂τ = 0 at t₀.
+    """
+    ratio, decay, gain = _kernel_terms(taus, times, values)
+    responses = _calc_kernel_responses(taus, times, values, method)
+    increments = jnp.diff(values, axis=0)[:, None, :]
+    scale = taus[None, :, None]
+    drive = (ratio * decay / scale) * responses[:-1] + ((gain - decay) / scale) * increments
+    derivative = _linear_recurrence(jnp.broadcast_to(decay, drive.shape), drive, jnp.zeros_like(responses[0]), method)
+    return responses, derivative
+
+
 @functools.partial(jax.custom_jvp, nondiff_argnums=(3,))
 def _kernel_responses(taus, times, values, method):
     return _calc_kernel_responses(taus, times, values, method)
@@ -131,18 +147,12 @@ def _kernel_responses_jvp(method, primals, tangents):
     """Forward mode with ∂g/∂τ computed once, not once per tangent direction: a fit's
     Jacobian pushes one tangent per parameter, and only the τ ones reach the kernel.
 
-    Differentiating the update h' = a h + c Δu in τ, with x = Δ/τ:
-    ∂h'/∂τ = a ∂h/∂τ + (x a / τ) h + ((1 − e^{−x})/x − e^{−x}) Δu / τ, from ∂h/∂τ = 0 at t₀.
-    The input enters linearly (g is linear in u); times are not differentiated.
+    ∂g/∂τ from :func:`calc_kernel_responses_and_derivatives`. The input enters
+    linearly (g is linear in u); times are not differentiated.
     """
     taus, times, values = primals
     taus_dot, _, values_dot = tangents
-    ratio, decay, gain = _kernel_terms(taus, times, values)
-    responses = _calc_kernel_responses(taus, times, values, method)
-    increments = jnp.diff(values, axis=0)[:, None, :]
-    scale = (taus[None, :, None])
-    drive = (ratio * decay / scale) * responses[:-1] + ((gain - decay) / scale) * increments
-    derivative = _linear_recurrence(jnp.broadcast_to(decay, drive.shape), drive, jnp.zeros_like(responses[0]), method)
+    responses, derivative = calc_kernel_responses_and_derivatives(taus, times, values, method)
     tangent = jnp.zeros_like(responses)
     if not isinstance(taus_dot, SymbolicZero):
         tangent = tangent + derivative * taus_dot[None, :, None]
