@@ -11,6 +11,7 @@ import json
 
 import jax.numpy as jnp
 import numpy as np
+import pyarrow.parquet as pq
 import pytest
 
 from hydrotact import HydrotactError
@@ -125,13 +126,17 @@ def test_calibrate_on_three_and_compare_three(stand_in, tmp_path):
             assert channel["hold_shape_rms_Pa"] < 1.5 * channel["noise_Pa"], (entry["source"], name, channel)
             assert channel["rms_Pa"] < 5.0 * channel["noise_Pa"], (entry["source"], name, channel)
             assert channel["r2"] > 0.99  # a channel that barely moves has an R² near its noise
-    # On the fit's own logs, with the baseline the fit found, the fit's residuals: to
-    # 5 % (measured 0.3-3.9 %) so far, not exactly — the fit's contact set comes from
-    # its last-but-one amplitudes, compare's from the final ones (issue 13, open).
+    # On the fit's own logs, with the baseline solved over all their samples (the
+    # fit's own baseline, given its laws): the fit's residuals, sample by sample.
     own = compare_fit(tmp_path / "fit", [calibration[0][0]], tmp_path / "own", tare="all", report_warning=messages.append)
     fitted = report["residuals"][0]["channels"]
     for name, channel in own["logs"][0]["channels"].items():
-        assert channel["rms_Pa"] == pytest.approx(fitted[name]["rms_Pa"], rel=0.05)
+        assert channel["rms_Pa"] == pytest.approx(fitted[name]["rms_Pa"], rel=1e-6)
+    predicted = pq.read_table(tmp_path / "own" / f"{calibration[0][0].stem}_predicted.parquet").to_pydict()
+    log = fit.logs[0]
+    for c, name in enumerate(fit.channels):
+        error = (np.asarray(calibration[0][1].columns[name]) - np.asarray(predicted[f"{name}_predicted"])) / log.noise[c]
+        np.testing.assert_allclose(np.where(log.mask[:, c], error, 0.0), fit.residuals[0][:, c], atol=1e-8)
 
 
 def test_fit_and_compare_from_the_command_line(stand_in, tmp_path, capsys):

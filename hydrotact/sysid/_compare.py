@@ -28,7 +28,7 @@ import numpy as np
 from .._errors import HydrotactError
 from ..data import estimate_noise, read_material
 from ..visco import Prony
-from ._lumped import POWERS, PressData, calc_bases, calc_depths
+from ._lumped import POWERS, PressData, calc_bases, calc_depths, solve_baselines
 from ._press_fit import DRIFT_KNOT_S, drift_basis, find_clipped, find_kinks, upper_limit
 from ._presses import SITE_TOLERANCE, find_log_presses
 from ._problem import _file_digest
@@ -129,18 +129,12 @@ def _own_log(report, digest):
     return None
 
 
-def _solve_baseline(basis, observed, residual_free, used):
-    """(D, C) baseline coefficients fitting observed − residual_free on `used` (T, C)."""
-    coefficients = np.zeros((basis.shape[1], observed.shape[1]))
-    for c in range(observed.shape[1]):
-        rows = used[:, c]
-        if not rows.any():
-            raise HydrotactError("no sample to tare on")
-        design = basis[rows]
-        normal = design.T @ design
-        ridge = 1e-9 * np.trace(normal) / len(normal)
-        coefficients[:, c] = np.linalg.solve(normal + ridge * np.eye(len(normal)), design.T @ (observed[rows, c] - residual_free[rows, c]))
-    return coefficients
+def _solve_baseline(basis, observed, elastic, used):
+    """(D, C) baseline coefficients fitting observed − elastic on `used` (T, C) (the
+    press fit's own solve, so that a fitted log is reproduced exactly)."""
+    if not used.any(axis=0).all():
+        raise HydrotactError("no sample to tare on")
+    return np.asarray(solve_baselines(jnp.asarray(basis), jnp.asarray(observed - elastic), jnp.asarray(used))).T
 
 
 def compare_log(document, report, log, source, *, tare="no-load", drift=None, saturation_pa=None, report_message=None) -> Comparison:

@@ -234,6 +234,17 @@ def _find_actives(bases, contact, datas):
     return actives
 
 
+def solve_baselines(basis, targets, used):
+    """(C, D) each channel's baseline coefficients: least squares of targets (T, C)
+    on the basis (T, D) over the `used` samples (T, C) (a 1e-9 ridge, relative to
+    the normal matrix' mean diagonal, for a basis function no used sample reaches)."""
+    weights = used.astype(basis.dtype)
+    normal = jnp.einsum("td,tc,te->cde", basis, weights, basis)
+    ridge = 1e-9 * jnp.trace(normal, axis1=1, axis2=2) / basis.shape[1]
+    rhs = jnp.einsum("td,tc->cd", basis, weights * targets)
+    return jnp.linalg.solve(normal + ridge[:, None, None] * jnp.eye(basis.shape[1])[None], rhs[:, :, None])[:, :, 0]
+
+
 def calc_press_residuals(shape: Prony, onsets, lags, datas):
     """Weighted residuals of the lumped press model over the logs `datas` (a tuple of
     PressData; `onsets` a tuple of (P_l,) onsets, `lags` of lags, one per log) at the
@@ -261,8 +272,8 @@ def calc_press_residuals(shape: Prony, onsets, lags, datas):
 
 def calc_press_jacobian(layout: "PressLayout", x, args, linear: bool = False):
     """The flat weighted residuals (R,) and their Jacobian (R, M) in x, by hand
-    (with `linear`, also the linear parameters: baseline coefficients per log
-    [(C, D_l)] and amplitudes (C, S, J)).
+    (with `linear`, also the amplitudes (C, S, J) and per log the bases (T, S, J)
+    and the contact (T,)).
 
     Variable projection's derivative (Golub and Pereyra) per direction k:
     v = −dΦ a on the active samples, da = N⁻¹ (Φᵀ v + dΦᵀ r), dr = v − Φ da (exact for
@@ -279,7 +290,7 @@ def calc_press_jacobian(layout: "PressLayout", x, args, linear: bool = False):
     pieces = [_bases_and_derivatives(shape, onset, jnp.asarray(lag, x.dtype), data, layout.estimate_lag) for data, onset, lag in zip(datas, onsets, lags)]
     bases = [piece[0] for piece in pieces]
     actives = _find_actives(bases, [piece[3] for piece in pieces], datas)
-    drifts, amplitudes, residuals, (weighted, blocks, factors, scale) = _solve_linear(bases, datas, actives)
+    _, amplitudes, residuals, (weighted, blocks, factors, scale) = _solve_linear(bases, datas, actives)
     size = layout.size
     num_channels, num_sites, num_powers = amplitudes.shape
     first_onset = 2 * k
@@ -318,7 +329,7 @@ def calc_press_jacobian(layout: "PressLayout", x, args, linear: bool = False):
         fitted = jnp.einsum("ctd,mcd->mct", drift, step[:, :, first[log] : first[log] + sizes[log]]) + jnp.einsum("cts,mcs->mct", sites, step[:, :, num_baseline:])
         columns.append(jnp.transpose(vector - fitted, (2, 1, 0)).reshape(-1, size))
     value, jacobian = jnp.concatenate([r.reshape(-1) for r in residuals]), jnp.concatenate(columns, axis=0)
-    return (value, jacobian, drifts, amplitudes) if linear else (value, jacobian)
+    return (value, jacobian, amplitudes, bases, [piece[3] for piece in pieces]) if linear else (value, jacobian)
 
 
 def calc_press_predictions(shape: Prony, onsets, lag, baseline_coefficients, amplitudes, data: PressData):

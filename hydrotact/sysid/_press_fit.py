@@ -44,6 +44,7 @@ from ._lumped import (
     PressLayout,
     calc_press_jacobian,
     press_residual_fn,
+    solve_baselines,
 )
 from ._presses import GAP_FACTOR, POSITION_COLUMNS, PRESS_THRESHOLD, SITE_TOLERANCE, find_log_presses
 from ._solve import make_solver, solve_least_squares, solver_name
@@ -429,12 +430,20 @@ def _solve_press(layout, solver, max_steps, x0, args):
 
 @eqx.filter_jit
 def _press_outputs(layout, x, args):
-    """At x: (the residuals per log, baselines, amplitudes) and the Jacobian."""
-    value, jacobian, drifts, amplitudes = calc_press_jacobian(layout, x, args, linear=True)
-    rows = [data.observed.size for data in args[0]]
-    pieces = jnp.split(value, [sum(rows[: k + 1]) for k in range(len(rows) - 1)])
-    residuals = [piece.reshape(data.observed.shape) for piece, data in zip(pieces, args[0])]
-    return (residuals, drifts, amplitudes), jacobian
+    """At x: (the weighted residuals per log, baselines, amplitudes) and the
+    Jacobian. The residuals are the model's own, as `compare` predicts a log: the
+    baseline + max(0, Σ A B) in contact with the final amplitudes, each log's
+    baseline solved given them (the solver's projection found where the elastic part
+    pushes from the amplitudes of a pass before; at its solution the two differ only
+    at a few samples where the push starts or ends)."""
+    _, jacobian, amplitudes, bases, contact = calc_press_jacobian(layout, x, args, linear=True)
+    residuals, baselines = [], []
+    for data, basis, touching in zip(args[0], bases, contact):
+        elastic = jnp.where(touching[:, None], jnp.maximum(jnp.einsum("tsj,csj->tc", basis, amplitudes), 0.0), 0.0)
+        coefficients = solve_baselines(data.baseline, data.observed - elastic, data.weights > 0.0)
+        residuals.append((data.observed - elastic - data.baseline @ coefficients.T) * data.weights)
+        baselines.append(coefficients)
+    return (residuals, baselines, amplitudes), jacobian
 
 
 def _fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps):
