@@ -452,7 +452,7 @@ def _fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps)
     args = (datas, tuple(jnp.asarray(log.onset_start) for log in logs), tuple(jnp.asarray(float(lag)) for _ in logs))
     x0 = jnp.asarray(_initial_x(layout, logs, lag))
     solution = _solve_press(layout, solver, max_steps, x0, args)
-    return layout, datas, args, solution
+    return layout, args, solution
 
 
 def fit_press_logs(
@@ -502,18 +502,18 @@ def _fit_press_logs(logs, sources, *, terms, indentation, position_columns, drif
     counts = range(1, MAX_TERMS + 1) if terms == "auto" else [terms]
     best = None
     for count in counts:
-        layout, datas, args, solution = _fit_terms(count, prepared, len(sites), estimate_lag, lag, solver, max_steps)
+        layout, args, solution = _fit_terms(count, prepared, len(sites), estimate_lag, lag, solver, max_steps)
         outputs = _press_outputs(layout, solution.value, args)
         chi_square = float(sum(jnp.sum(r**2) for r in outputs[0][0]))
         bic = chi_square + (layout.size + num_linear) * math.log(num_used)
         if best is None or bic < best[0]:
-            best = (bic, count, layout, datas, args, solution, chi_square, outputs)
-    _, count, layout, datas, args, solution, chi_square, outputs = best
-    return _summarise(layout, datas, args, solution, chi_square, outputs, prepared, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, report, position_columns, indentation)
+            best = (bic, count, layout, args, solution, chi_square, outputs)
+    _, count, layout, args, solution, chi_square, outputs = best
+    return _summarise(layout, args, solution, chi_square, outputs, prepared, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, report, position_columns, indentation)
 
 
 def _summarise(
-    layout, datas, args, solution, chi_square, outputs, logs, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, report, position_columns, indentation,
+    layout, args, solution, chi_square, outputs, logs, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, report, position_columns, indentation,
 ) -> PressFit:
     x = solution.value
     (residuals, baselines, amplitudes), jacobian = outputs
@@ -524,7 +524,7 @@ def _summarise(
     covariance = np.linalg.pinv(normal) * scale
     std_x = np.sqrt(np.maximum(np.diag(covariance), 0.0))
     x = np.asarray(x)
-    shape, onsets, lags = layout.unpack(jnp.asarray(x), *args[1:])
+    _, onsets, lags = layout.unpack(jnp.asarray(x), *args[1:])
     k = layout.num_terms
     step = float(np.median(np.concatenate([np.diff(log.times) for log in logs])))
     span = max(float(log.times[-1] - log.times[0]) for log in logs)
