@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from hydrotact.sysid._lumped import POWERS, PressData, PressLayout, calc_press_jacobian, calc_press_predictions, calc_press_residuals, press_residual_fn
-from hydrotact.sysid._press_fit import drift_basis
+from hydrotact.sysid._press_data import drift_basis
 from hydrotact.sysid._solve import solve_least_squares
 from hydrotact.visco import Prony
 

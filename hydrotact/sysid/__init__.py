@@ -32,10 +32,10 @@ from ._fit_logs import read_logs as read_logs
 from ._model import ParameterLayout as ParameterLayout
 from ._model import calc_predictions as calc_predictions
 from ._model import calc_residuals as calc_residuals
+from ._press_data import parse_drift as parse_drift
 from ._press_fit import Parameter as Parameter
 from ._press_fit import PressFit as PressFit
 from ._press_fit import fit_press_logs as fit_press_logs
-from ._press_fit import parse_drift as parse_drift
 from ._press_report import write_press_fit_outputs as write_press_fit_outputs
 from ._presses import (
     Presses as Presses,

@@ -29,7 +29,7 @@ from .._errors import HydrotactError
 from ..data import estimate_noise, read_material
 from ..visco import Prony
 from ._lumped import POWERS, PressData, calc_bases, calc_depths, solve_baselines
-from ._press_fit import DRIFT_KNOT_S, drift_basis, find_clipped, find_kinks, upper_limit
+from ._press_data import DRIFT_KNOT_S, drift_basis, find_clipped, find_kinks, upper_limit
 from ._presses import SITE_TOLERANCE, find_log_presses
 from ._problem import _file_digest
 

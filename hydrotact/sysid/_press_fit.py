@@ -26,7 +26,6 @@ value is *not identified* — its value is the solver's last word, not a measure
 
 import dataclasses
 import math
-import warnings
 
 import equinox as eqx
 import jax
@@ -34,198 +33,21 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import HydrotactError
-from ..data import estimate_noise
-from ..data._table import sensor_spec
 from ._lumped import (
     LAG_BOUND,
     ONSET_HALF_RANGE,
     POWERS,
-    PressData,
     PressLayout,
     calc_press_jacobian,
     press_residual_fn,
     solve_baselines,
 )
-from ._presses import GAP_FACTOR, POSITION_COLUMNS, PRESS_THRESHOLD, SITE_TOLERANCE, find_log_presses
+from ._press_data import DRIFT_KNOT_S, PressLog, prepare_press_logs
+from ._presses import POSITION_COLUMNS, PRESS_THRESHOLD
 from ._solve import make_solver, solve_least_squares, solver_name
 
-DRIFT_KNOT_S = 30.0  # s between the baseline spline's knots: slower than any relaxation we fit
-RESPONSE_SNR = 20.0  # a channel responds to a press when it moves this many noise stds
 CHI_SQUARE_WARNING = 4.0  # a reduced χ² above this: the model misses the data
 MAX_TERMS = 3  # Prony terms the lumped model tries with terms="auto"
-FLAT_TOP_SAMPLES = 3  # a channel's maximum held this many times is its clip level
-MIN_SAMPLES = 8  # a log shorter than this holds no press to fit
-KINK_FRACTION = 0.3  # a change of the stage's speed above this of its top speed is a kink
-
-
-def drift_basis(times, drift) -> np.ndarray:
-    """(T, D) the baseline basis of a log: drift "none" (a constant), "linear", or a
-    knot spacing in s (cubic B-splines over the log, at least one interval)."""
-    times = np.asarray(times, dtype=np.float64)
-    span = max(float(times[-1] - times[0]), 1e-12)
-    scaled = (times - times[0]) / span
-    if drift == "none":
-        return np.ones((len(times), 1))
-    if drift == "linear":
-        return np.column_stack([np.ones_like(scaled), 2.0 * scaled - 1.0])
-    from scipy.interpolate import BSpline
-
-    intervals = max(1, math.ceil(span / float(drift)))
-    knots = np.concatenate([[0.0] * 3, np.linspace(0.0, 1.0, intervals + 1), [1.0] * 3])
-    return BSpline.design_matrix(np.clip(scaled, 0.0, 1.0), knots, 3).toarray()
-
-
-def parse_drift(text):
-    """'none', 'linear' or a knot spacing in seconds (a positive number)."""
-    if text in ("none", "linear"):
-        return text
-    try:
-        value = float(text)
-    except (TypeError, ValueError):
-        raise HydrotactError(f"--drift: expected none, linear or a knot spacing in seconds, got {text!r}") from None
-    if not value > 0.0 or not math.isfinite(value):
-        raise HydrotactError(f"--drift: the knot spacing must be a positive number of seconds, got {text!r}")
-    return value
-
-
-def upper_limit(log, source, saturation_pa=None):
-    """The reading limit of a log's channels: `saturation_pa` when given, else its
-    part's upper limit for absolute readings of a known sensor, else None."""
-    if saturation_pa is not None:
-        return float(saturation_pa)
-    spec = sensor_spec(log.metadata["sensor"], source) if log.metadata.get("sensor") else None
-    return float(spec.part.range_pa[1]) if spec is not None and log.metadata.get("pressure") == "absolute" else None
-
-
-def find_clipped(observed, upper=None, lower=None) -> np.ndarray:
-    """(T, C) samples a barometer clipped: at or beyond the part's limits (when
-    known), or at a channel's maximum (minimum) where that value repeats at least
-    FLAT_TOP_SAMPLES times (a clipped reading is flat; a noisy peak is not)."""
-    observed = np.asarray(observed, dtype=np.float64)
-    clipped = np.zeros(observed.shape, dtype=bool)
-    if upper is not None:
-        clipped |= observed >= upper
-    if lower is not None:
-        clipped |= observed <= lower
-    for extreme in (observed.max(axis=0), observed.min(axis=0)):
-        at = observed == extreme[None, :]
-        flat = at.sum(axis=0) >= FLAT_TOP_SAMPLES
-        clipped |= at & flat[None, :]
-    return clipped
-
-
-def find_kinks(times, travel, reach: int = 1) -> np.ndarray:
-    """(T,) samples within `reach` samples of a kink in the travel (where a ramp starts
-    or ends: the stage's speed changes by more than KINK_FRACTION of its top speed).
-    Between two samples of a log the stage's path is unknown; across a kink, the
-    travel a lagged pressure saw (interpolated between the samples) is off by up to a
-    quarter of a step's travel — at 1 mm/s and 16 Hz, 15 um or tens of Pa. Such
-    samples are masked."""
-    times, travel = np.asarray(times, dtype=np.float64), np.asarray(travel, dtype=np.float64)
-    if len(travel) < 3:
-        return np.zeros(len(travel), dtype=bool)
-    speed = np.diff(travel) / np.maximum(np.diff(times), 1e-12)
-    top = np.percentile(np.abs(speed), 99)
-    kink = np.zeros(len(travel), dtype=bool)
-    if top > 0.0:
-        kink[1:-1] = np.abs(np.diff(speed)) > KINK_FRACTION * top
-    near = kink.copy()
-    for shift in range(1, reach + 1):
-        near[shift:] |= kink[:-shift]
-        near[:-shift] |= kink[shift:]
-    return near
-
-
-@dataclasses.dataclass(frozen=True)
-class PressLog:
-    """One log made ready for the fit (host): `source`; `times` (s from the log's
-    start), `travel`, `press`, `press_site` (global site ids), `observed`, `mask`
-    (True: fitted), `noise` (C,), `baseline` (T, D), `onset_start` (P,) the onsets'
-    first estimates, `clipped` (C,) masked samples per channel, `t0` the log's first
-    time."""
-
-    source: str
-    times: np.ndarray
-    travel: np.ndarray
-    press: np.ndarray
-    press_site: np.ndarray
-    observed: np.ndarray
-    mask: np.ndarray
-    noise: np.ndarray
-    baseline: np.ndarray
-    onset_start: np.ndarray
-    clipped: np.ndarray
-    t0: float
-
-    def to_data(self, num_sites: int) -> PressData:
-        weights = np.where(self.mask, 1.0 / self.noise[None, :], 0.0)
-        return PressData(
-            jnp.asarray(self.times), jnp.asarray(self.travel), jnp.asarray(self.press), jnp.asarray(self.press_site),
-            jnp.asarray(self.observed), jnp.asarray(weights), jnp.asarray(self.baseline), num_sites,
-        )
-
-
-def _level(values) -> np.ndarray:
-    """(C,) the median of rows of values with NaN where masked (NaN where all are)."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # an all-masked column: NaN, counted as no response
-        return np.nanmedian(values, axis=0)
-
-
-def _responses(observed, travel, times, presses, noise) -> np.ndarray:
-    """(P, C) each press's step in each channel, in noise stds: the level at the
-    start of the hold (the first samples within 5 % of the press's deepest travel)
-    against the line through the levels just before and just after the press (the
-    baseline drifts: over a 20 s hold by more than a far channel's step). `observed`
-    holds NaN where masked. Presses that began in a gap count 0."""
-    out = np.zeros((presses.num_presses, observed.shape[1]))
-    for p, (start, end) in enumerate(zip(presses.starts, presses.ends)):
-        if presses.unseen[p]:
-            continue
-        before = _level(observed[max(start - 4, 0) : max(start, 1)])
-        after = _level(observed[min(end, len(observed) - 1) : end + 4])
-        deep = start + np.flatnonzero(travel[start:end] >= travel[start] + 0.95 * (np.max(travel[start:end]) - travel[start]))[:4]
-        fraction = (np.mean(deep) - (start - 1)) / max(end - start + 1, 1)
-        if np.any(np.diff(times[int(deep[-1]) : end + 4]) > GAP_FACTOR * np.median(np.diff(times))):
-            fraction = 0.0  # the press's end fell into a gap: its level after is minutes of drift away
-        out[p] = np.nan_to_num(np.abs(_level(observed[deep]) - (before + fraction * (after - before))) / noise, nan=0.0)
-    return out
-
-
-def _first_onsets(travel, observed, mask, presses, noise, lag, times) -> np.ndarray:
-    """(P,) each press's onset estimate, from its strongest channel's rise on the
-    approach: the (lagged) travel where the rise first passes 10 % and 50 % of its
-    step, extrapolated back to zero as for a law δ² (δ₁₀ = 0.45 δ₅₀; a Hertz law's
-    0.34 or a cone's 0.45 put the estimate within a third of (travel₅₀ − travel₁₀), well
-    inside the fitted onset's range). A press whose step is under 10 × RESPONSE_SNR
-    noise stds has a 10 % point lost in the noise: it starts at the median estimate of
-    the others (the skin's height varies little between sites a few mm apart)."""
-    lagged = np.interp(times - lag, times, travel)
-    onsets = np.full(presses.num_presses, np.nan)
-    for p, (start, end) in enumerate(zip(presses.starts, presses.ends)):
-        deepest = start + int(np.argmax(lagged[start:end]))
-        if deepest <= start:
-            continue
-        before = _level(np.where(mask, observed, np.nan)[max(start - 4, 0) : max(start, 1)])
-        used = mask[start : deepest + 1] & np.isfinite(before)[None, :]
-        rise = (observed[start : deepest + 1] - np.nan_to_num(before)) * np.sign(_level(np.where(used, observed[start : deepest + 1], np.nan)[-4:]) - np.nan_to_num(before))
-        rise = np.nan_to_num(rise)
-        strongest = int(np.argmax(np.max(np.where(used, np.abs(rise), 0.0), axis=0) / noise))
-        curve = np.where(used[:, strongest], rise[:, strongest], -np.inf)
-        step = np.max(curve)
-        if not step > 10 * RESPONSE_SNR * noise[strongest]:
-            continue
-        tenth = np.flatnonzero(curve >= 0.1 * step)
-        half = np.flatnonzero(curve >= 0.5 * step)
-        if not (tenth.size and half.size):
-            continue
-        low, high = lagged[start + tenth[0]], lagged[start + half[0]]
-        onsets[p] = low - 0.45 / 0.55 * max(high - low, 0.0)
-    weak = np.isnan(onsets)
-    if weak.all():
-        return np.array([float(np.max(lagged[start:end])) for start, end in zip(presses.starts, presses.ends)]) - ONSET_HALF_RANGE
-    onsets[weak] = np.median(onsets[~weak])
-    return onsets
 
 
 @dataclasses.dataclass(frozen=True)
@@ -310,107 +132,6 @@ def _initial_x(layout: PressLayout, logs: list[PressLog], lag: float = 0.0) -> n
     if layout.estimate_lag:
         parts.append(np.full(len(logs), math.atanh(float(lag) / LAG_BOUND)))
     return np.concatenate(parts)
-
-
-def prepare_press_logs(
-    logs, sources, *, indentation="indentation", position_columns=POSITION_COLUMNS, drift=DRIFT_KNOT_S, lag=0.0,
-    saturation_pa=None, threshold=PRESS_THRESHOLD, report=None,
-):
-    """The logs made ready for the fit: presses and sites found, sites matched across
-    logs by position, clipped samples masked, noise estimated, silent channels and
-    logs without presses skipped (with a line through `report`).
-
-    **Returns:** (PressLogs, fitted channel names, site positions (S, k), skipped
-    {name: reason}).
-    """
-    report = report or (lambda message: None)
-    channels = list(logs[0].metadata["channels"])
-    for log, source in zip(logs, sources):
-        if list(log.metadata["channels"]) != channels:
-            raise HydrotactError(f"{source}: channels {', '.join(log.metadata['channels'])} differ from {sources[0]}'s ({', '.join(channels)}); a joint lumped fit needs logs of one sensor")
-    skipped, kept = {}, []
-    for log, source in zip(logs, sources):
-        if log.num_samples < MIN_SAMPLES:
-            raise HydrotactError(f"{source}: {log.num_samples} samples; a fit needs at least {MIN_SAMPLES}")
-        try:
-            presses = find_log_presses(log, indentation, position_columns, threshold=threshold, source=source)
-        except HydrotactError as error:
-            if "no indentation column" in str(error) or "stage moves" in str(error):
-                raise
-            skipped[source] = str(error).removeprefix(f"{source}: ")
-            continue
-        if presses.unseen.all():
-            skipped[source] = "every press began in a gap of the log"
-            continue
-        if presses.unseen.any():
-            report(f"{source}: {int(presses.unseen.sum())} press(es) began in a gap of the log (loading unseen): masked")
-        kept.append((log, source, presses))
-    if not kept:
-        raise HydrotactError("no log has a press to fit: " + "; ".join(f"{name}: {reason}" for name, reason in skipped.items()))
-    for name, reason in skipped.items():
-        report(f"{name}: skipped: {reason}")
-    # Sites shared by the logs: positions within SITE_TOLERANCE are one site; a log
-    # without position columns has sites of its own, one per press.
-    centres, prepared = [], []
-    for log, source, presses in kept:
-        if presses.positions.shape[1] == 0:
-            site_ids = np.arange(presses.num_presses) + len(centres)
-            centres.extend([np.full(len(position_columns), np.nan)] * presses.num_presses)
-        else:
-            site_ids = np.zeros(presses.num_sites, dtype=np.int64)
-            for s, position in enumerate(presses.positions):
-                match = [k for k, centre in enumerate(centres) if len(centre) == len(position) and np.all(np.abs(centre - position) <= SITE_TOLERANCE)]
-                site_ids[s] = match[0] if match else len(centres)
-                if not match:
-                    centres.append(np.asarray(position, dtype=np.float64))
-            site_ids = site_ids[presses.sites]
-        prepared.append((log, source, presses, site_ids))
-    # Channels: masked where clipped; fitted when they respond to some press.
-    staged = []
-    responding = np.zeros(len(channels), dtype=bool)
-    for log, source, presses, site_ids in prepared:
-        observed = np.asarray(log.channels, dtype=np.float64)
-        travel = np.asarray(log.columns[indentation], dtype=np.float64)
-        clipped = find_clipped(observed, upper_limit(log, source, saturation_pa))
-        masked = clipped | find_kinks(log.times, travel)[:, None]
-        noise = np.array([estimate_noise(observed[~masked[:, c], c : c + 1])[0] for c in range(observed.shape[1])])
-        usable = np.where(masked, np.nan, observed)
-        log_responding = _responses(usable, travel, np.asarray(log.times, dtype=np.float64), presses, noise).max(axis=0, initial=0.0) > RESPONSE_SNR
-        responding |= log_responding
-        staged.append((log, source, presses, site_ids, observed, clipped, masked, noise, log_responding))
-    for c, name in enumerate(channels):
-        if not responding[c]:
-            skipped[name] = f"channel {name!r} moves less than {RESPONSE_SNR:g} noise stds in every press: not fitted"
-            report(f"skipped: {skipped[name]}")
-    if not responding.any():
-        raise HydrotactError("no channel responds to the presses in any log (each moves less than " f"{RESPONSE_SNR:g} noise stds): nothing to fit")
-    fitted = np.flatnonzero(responding)
-    out = []
-    for log, source, presses, site_ids, observed, clipped, masked, noise, log_responding in staged:
-        if not log_responding[fitted].any():
-            skipped[source] = f"no channel responds to its presses (each moves less than {RESPONSE_SNR:g} noise stds)"
-            report(f"{source}: skipped: {skipped[source]}")
-            continue
-        times = np.asarray(log.times, dtype=np.float64)
-        travel = np.asarray(log.columns[indentation], dtype=np.float64)
-        mask = ~masked[:, fitted]
-        for start, end in zip(presses.starts[presses.unseen], presses.ends[presses.unseen]):
-            mask[start:end] = False
-        seen = dataclasses.replace(presses, starts=presses.starts[~presses.unseen], ends=presses.ends[~presses.unseen], sites=presses.sites[~presses.unseen], unseen=presses.unseen[~presses.unseen])
-        onset_start = _first_onsets(travel, observed[:, fitted], mask, seen, noise[fitted], float(lag), times)
-        out.append(PressLog(
-            source=source, times=times - times[0], travel=travel, press=seen.press_of_samples(log.num_samples), press_site=site_ids[~presses.unseen],
-            observed=observed[:, fitted], mask=mask, noise=noise[fitted], baseline=drift_basis(times, drift), onset_start=onset_start,
-            clipped=clipped[:, fitted].sum(axis=0), t0=float(times[0]),
-        ))
-        if clipped[:, fitted].any():
-            counts = ", ".join(f"{channels[c]} {n}" for c, n in zip(fitted, clipped[:, fitted].sum(axis=0)) if n)
-            report(f"{source}: masked clipped samples ({counts})")
-    if not out:
-        raise HydrotactError("no log has a responding channel: " + "; ".join(f"{name}: {reason}" for name, reason in skipped.items()))
-    width = max((len(c) for c in centres), default=0)
-    sites = np.array([np.resize(c, width) for c in centres]) if centres else np.zeros((0, 0))
-    return out, tuple(channels[c] for c in fitted), sites, skipped
 
 
 def _identified_time(value, std, step, span):
