@@ -6,10 +6,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from hydrotact.sysid._lumped import POWERS, PressData, PressLayout, calc_press_jacobian, calc_press_predictions, calc_press_residuals, press_residual_fn
+from hydrotact.sysid._lumped import DEPTH_SCALE, POWERS, PressLayout, calc_bases, calc_depths, calc_press_jacobian, calc_press_predictions, calc_press_residuals, make_press_data, press_residual_fn
 from hydrotact.sysid._press_data import drift_basis
 from hydrotact.sysid._solve import solve_least_squares
-from hydrotact.visco import Prony
+from hydrotact.visco import Prony, calc_hereditary_integral
 
 SHAPE = Prony(jnp.asarray(1.0), jnp.asarray([0.1, 0.15]), jnp.asarray([0.5, 5.0]))
 
@@ -37,10 +37,7 @@ def _amplitudes(rng, num_channels, num_sites):
 
 
 def _data(t, travel, press, sites, observed, noise, num_sites):
-    return PressData(
-        jnp.asarray(t), jnp.asarray(travel), jnp.asarray(press), jnp.asarray(sites), jnp.asarray(observed), jnp.full(observed.shape, 1 / noise),
-        jnp.asarray(drift_basis(t, 30.0)), num_sites,
-    )
+    return make_press_data(t, travel, press, sites, observed, np.full(observed.shape, 1 / noise), drift_basis(t, 30.0), num_sites)
 
 
 def _model_log(rng, num_samples, num_presses, num_sites, num_channels, hold):
@@ -55,6 +52,30 @@ def _model_log(rng, num_samples, num_presses, num_sites, num_channels, hold):
     clean = np.asarray(calc_press_predictions(SHAPE, jnp.asarray(onsets), 0.05, jnp.asarray(baseline), jnp.asarray(amplitudes), blank))
     noise = 2.0
     return _data(t, travel, press, sites, clean + noise * rng.standard_normal(clean.shape), noise, num_sites), onsets, amplitudes, baseline
+
+
+def test_press_windows_give_the_integral_of_the_site_split_law():
+    """The bases from each press's window and free decay equal the hereditary
+    integral of the whole site-split input, where the windows tie: a press from the
+    first sample, back-to-back presses at one site and at two, a press to the last
+    sample, one whose samples fell in a gap (none), and a site that sees two presses
+    with a rest between (site 1: its memory, negative while the skin recovers, runs
+    into its second press)."""
+    rng = np.random.default_rng(3)
+    t = np.cumsum(np.full(60, 1 / 16) + 0.005 * rng.standard_normal(60))
+    travel = 1e-3 * np.abs(np.sin(t))
+    press = -np.ones(60, int)
+    press[0:8], press[8:15], press[15:22], press[30:40], press[50:60] = 0, 1, 2, 4, 5  # press 3 has no samples
+    sites = np.array([0, 0, 1, 2, 1, 0])
+    data = make_press_data(t, travel, press, sites, np.zeros((60, 1)), np.ones((60, 1)), np.ones((60, 1)), 3)
+    assert [int(n) for n in data.window_last] == [8, 17, 26, 27, 39, 50]  # windows of 9, 9, 9, 1 (no samples), 12, 11
+    depths = calc_depths(data, jnp.asarray(np.full(6, 0.2e-3)), 0.0)
+    inputs = (jnp.asarray(sites)[jnp.maximum(data.press, 0)][:, None] == jnp.arange(3)[None, :]) & (data.press >= 0)[:, None]
+    law = (depths / DEPTH_SCALE)[:, None] ** jnp.asarray(POWERS)[None, :]
+    expected = calc_hereditary_integral(SHAPE, data.times, inputs[:, :, None] * law[:, None, :])
+    np.testing.assert_allclose(np.asarray(calc_bases(SHAPE, depths, data)), np.asarray(expected), rtol=0, atol=1e-13 * float(jnp.max(jnp.abs(expected))))
+    assert float(jnp.max(expected[22:30, 1])) < 0.0 and float(jnp.max(expected[40:, 1])) < 0.0  # site 1 recovers after each press
+    assert float(jnp.max(jnp.abs(expected[:, 2]))) == 0.0  # site 2 saw only the press without samples
 
 
 def test_projection_at_the_truth_leaves_the_noise():

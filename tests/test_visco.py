@@ -30,6 +30,7 @@ from hydrotact.visco import (
     Prony,
     calc_barometer_readings,
     calc_hereditary_integral,
+    calc_kernel_responses_and_derivatives,
     calc_resampled,
     calc_sample_times,
     make_barometer_signal,
@@ -366,6 +367,22 @@ def test_methods_agree(rng, prony):
     scan = _response(prony, times, values, method="scan")
     associative = _response(prony, times, values, method="associative")
     _scale_close(associative, scan, 1e-13)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_restarted_sequences_are_independent_runs(rng, prony, method):
+    """Sequences concatenated with `restarts` (times stepping back between them, the
+    next one starting with a step) give each sequence's own responses and τ
+    derivatives, as separate calls do."""
+    pieces = [(_random_times(rng, count, 0.05, start=start), rng.normal(size=(count, 3)).cumsum(axis=0)) for count, start in ((40, 0.0), (1, 0.5), (25, 1.0))]
+    times = np.concatenate([t for t, _ in pieces])
+    values = np.concatenate([v for _, v in pieces])
+    restarts = np.concatenate([np.arange(len(t)) == 0 for t, _ in pieces])
+    joined = calc_kernel_responses_and_derivatives(prony.taus, jnp.asarray(times), jnp.asarray(values), method, restarts=jnp.asarray(restarts))
+    alone = [calc_kernel_responses_and_derivatives(prony.taus, jnp.asarray(t), jnp.asarray(v), method) for t, v in pieces]
+    for k in range(2):
+        _scale_close(joined[k], np.concatenate([piece[k] for piece in alone]), 1e-13)
+    assert calc_kernel_responses_and_derivatives(prony.taus, jnp.asarray(times), jnp.asarray(values), method, with_derivatives=False)[1] is None
 
 
 def test_unknown_method(prony):

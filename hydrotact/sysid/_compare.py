@@ -28,7 +28,7 @@ import numpy as np
 from .._errors import HydrotactError
 from ..data import estimate_noise, read_material
 from ..visco import Prony
-from ._lumped import POWERS, PressData, calc_bases, calc_depths, solve_baselines
+from ._lumped import POWERS, calc_bases, calc_depths, make_press_data, solve_baselines
 from ._press_data import DRIFT_KNOT_S, drift_basis, find_clipped, find_kinks, upper_limit
 from ._presses import SITE_TOLERANCE, find_log_presses
 from ._problem import _file_digest
@@ -177,10 +177,7 @@ def compare_log(document, report, log, source, *, tare="no-load", drift=None, sa
         mask[start:end] = False
     kept = dataclasses.replace(presses, starts=presses.starts[keep], ends=presses.ends[keep], sites=presses.sites[keep], unseen=presses.unseen[keep])
     press = kept.press_of_samples(log.num_samples)
-    data = PressData(
-        jnp.asarray(times - times[0]), jnp.asarray(log.columns[law["indentation"]], dtype=jnp.float64), jnp.asarray(press),
-        jnp.asarray(site_ids), jnp.zeros(observed.shape), jnp.ones(observed.shape), jnp.zeros((len(times), 1)), len(sites),
-    )
+    data = make_press_data(times - times[0], travel, press, site_ids, np.zeros(observed.shape), np.ones(observed.shape), np.zeros((len(times), 1)), len(sites))
     depths = calc_depths(data, jnp.asarray(onsets), lag)
     bases = np.asarray(calc_bases(_law_prony(document), depths, data))  # (T, S, J)
     amplitudes = np.array([[site["amplitudes_Pa"][name] for site in sites] for name in channels], dtype=np.float64)  # (C, S, J)

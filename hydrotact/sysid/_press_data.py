@@ -11,13 +11,12 @@ import dataclasses
 import math
 import warnings
 
-import jax.numpy as jnp
 import numpy as np
 
 from .._errors import HydrotactError
 from ..data import estimate_noise
 from ..data._table import sensor_spec
-from ._lumped import ONSET_HALF_RANGE, PressData
+from ._lumped import ONSET_HALF_RANGE, PressData, make_press_data
 from ._presses import GAP_FACTOR, POSITION_COLUMNS, PRESS_THRESHOLD, SITE_TOLERANCE, find_log_presses
 
 DRIFT_KNOT_S = 30.0  # s between the baseline spline's knots: slower than any relaxation we fit
@@ -128,10 +127,7 @@ class PressLog:
 
     def to_data(self, num_sites: int) -> PressData:
         weights = np.where(self.mask, 1.0 / self.noise[None, :], 0.0)
-        return PressData(
-            jnp.asarray(self.times), jnp.asarray(self.travel), jnp.asarray(self.press), jnp.asarray(self.press_site),
-            jnp.asarray(self.observed), jnp.asarray(weights), jnp.asarray(self.baseline), num_sites,
-        )
+        return make_press_data(self.times, self.travel, self.press, self.press_site, self.observed, weights, self.baseline, num_sites)
 
 
 def _level(values) -> np.ndarray:

@@ -83,6 +83,8 @@ def make_prony(long_term_modulus, moduli=(), taus=(), source: str | None = None)
 def _linear_recurrence(decay, drive, start, method: str):
     """States hₙ of hₙ₊₁ = aₙ hₙ + bₙ from h₀ = `start`: decay, drive (T−1, K, C),
     start (K, C) -> (T, K, C)."""
+    if decay.shape[0] == 0:  # one sample
+        return start[None]
     if method == "scan":
 
         def step(state, inputs):
@@ -106,33 +108,61 @@ def _linear_recurrence(decay, drive, start, method: str):
     return jnp.concatenate([start[None], states], axis=0)
 
 
-def _kernel_terms(taus, times, values):
+def _kernel_terms(taus, times, values, restarts=None):
     """Per step and term: x = Δ/τ, the decay a = e^{−x} and the unit-modulus gain
-    c = (1 − e^{−x})/x that multiplies the input increment (shapes (T−1, K, 1))."""
-    ratio = (jnp.diff(times)[:, None] / taus[None, :])[:, :, None]
-    return ratio, jnp.exp(-ratio), -jnp.expm1(-ratio) / ratio
+    c = (1 − e^{−x})/x that multiplies the input increment (shapes (T−1, K, 1)).
+    Where the next sample `restarts` (T,) the sequence, a = 0 (x and c are then
+    those of a unit step, unused)."""
+    steps = jnp.diff(times)
+    if restarts is not None:
+        steps = jnp.where(restarts[1:], 1.0, steps)  # a restart may step back in time
+    ratio = (steps[:, None] / taus[None, :])[:, :, None]
+    decay = jnp.exp(-ratio)
+    if restarts is not None:
+        decay = jnp.where(restarts[1:, None, None], 0.0, decay)
+    return ratio, decay, -jnp.expm1(-ratio) / ratio
 
 
-def _calc_kernel_responses(taus, times, values, method):
+def _increments(values, restarts=None):
+    """(T−1, 1, C) the input's increments; at a restart the new value itself (a step
+    from rest)."""
+    increments = jnp.diff(values, axis=0)
+    if restarts is not None:
+        increments = jnp.where(restarts[1:, None], values[1:], increments)
+    return increments[:, None, :]
+
+
+def _calc_kernel_responses(taus, times, values, method, restarts=None):
     """gₖ = (e^{−t/τₖ} ∗ u): the response of each unit-modulus term (T, K, C)."""
-    _, decay, gain = _kernel_terms(taus, times, values)
-    drive = gain * jnp.diff(values, axis=0)[:, None, :]
+    _, decay, gain = _kernel_terms(taus, times, values, restarts)
+    if restarts is not None:
+        gain = jnp.where(restarts[1:, None, None], 1.0, gain)  # a step's response is its height
+    drive = gain * _increments(values, restarts)
     start = jnp.broadcast_to(values[0], (taus.shape[0], values.shape[1]))  # the step at t0
     return _linear_recurrence(jnp.broadcast_to(decay, drive.shape), drive, start, method)
 
 
-def calc_kernel_responses_and_derivatives(taus, times, values, method: str = "scan"):
+def calc_kernel_responses_and_derivatives(taus, times, values, method: str = "scan", restarts=None, with_derivatives: bool = True):
     """Each unit-modulus term's response gₖ = (e^{−t/τₖ} ∗ u) and its derivative
     ∂gₖ/∂τₖ, both (T, K, C) for values (T, C).
 
     Differentiating the update h' = a h + c Δu in τ, with x = Δ/τ:
     ∂h'/∂τ = a ∂h/∂τ + (x a / τ) h + ((1 − e^{−x})/x − e^{−x}) Δu / τ, from ∂h/∂τ = 0 at t₀.
+
+    `restarts` (T,) bool, optional: the samples where the input starts again from
+    rest (several sequences concatenated, each from its own t₀; the times may step
+    back there). A restart's response is its value, whatever came before. Without
+    `with_derivatives`, the derivatives are None.
     """
-    ratio, decay, gain = _kernel_terms(taus, times, values)
-    responses = _calc_kernel_responses(taus, times, values, method)
-    increments = jnp.diff(values, axis=0)[:, None, :]
+    ratio, decay, gain = _kernel_terms(taus, times, values, restarts)
+    responses = _calc_kernel_responses(taus, times, values, method, restarts)
+    if not with_derivatives:
+        return responses, None
+    increments = _increments(values, restarts)
     scale = taus[None, :, None]
     drive = (ratio * decay / scale) * responses[:-1] + ((gain - decay) / scale) * increments
+    if restarts is not None:
+        drive = jnp.where(restarts[1:, None, None], 0.0, drive)
     derivative = _linear_recurrence(jnp.broadcast_to(decay, drive.shape), drive, jnp.zeros_like(responses[0]), method)
     return responses, derivative
 
