@@ -281,6 +281,24 @@ def test_capped_solve_reports_its_result(name):
     np.testing.assert_allclose(solution.value, [1.0, 1.0], rtol=1e-6)
 
 
+def test_lm_stops_at_a_kink_once_its_steps_are_tiny():
+    """At a minimum on a discontinuity of the residuals (each jumps by 0.01 where it
+    crosses 0), no step decreases the cost and optimistix's element-wise Cauchy test
+    waits for ~1e-10 steps; our Levenberg-Marquardt stops once a retried step is
+    below 1e-6 (1 + |y|): at the kink to that, in fewer steps, reported converged."""
+
+    def jumps(y, args):
+        offset = y - jnp.asarray([1.0, -2.0])
+        return jnp.concatenate([offset + 0.01 * jnp.sign(offset), 0.1 * offset])
+
+    x0 = jnp.asarray([3.0, 4.0])
+    ours = solve_least_squares(jumps, x0, None, make_solver("lm"), throw=False)
+    plain = solve_least_squares(jumps, x0, None, optx.LevenbergMarquardt(rtol=1e-10, atol=1e-10, linear_solver=lx.Normal(lx.Cholesky())), throw=False)
+    assert ours.converged and plain.converged
+    np.testing.assert_allclose(ours.value, [1.0, -2.0], atol=3e-6)
+    assert int(ours.num_steps) < 0.6 * int(plain.num_steps)
+
+
 # --- 4. the number of terms ------------------------------------------------------------------
 
 
