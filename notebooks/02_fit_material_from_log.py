@@ -34,12 +34,13 @@
 #    terms chosen by BIC; standard errors and correlations.
 # 4. **Check the fit**: traces, residuals in noise units, the relaxation modulus with
 #    its confidence band.
-# 5. **Lumped mode**: the same recording with only an indentation column, for a sensor
-#    nobody has modelled.
+# 5. **A stage log, no model of the sensor** (`--lumped`): a curved sensor pressed at a
+#    grid of sites, with an unknown contact onset per press, lag, drift, a clipped and a
+#    dead channel; the fit, and a held-out log predicted from it (`compare`).
 # 6. **Where next**: simulate with the fitted `material.json`.
 #
 # Set `HYDROTACT_SMOKE=1` to run it at the small size the test suite uses (fewer rays
-# per taxel, a 20 s log, at most two Prony terms).
+# per taxel, a 20 s log, at most two Prony terms, 6 stage sites instead of 20).
 
 # %%
 import json
@@ -69,8 +70,8 @@ STARTED = time.perf_counter()
 # 5 x 5 pad (`pad5x5`) a few times, to different depths, holds, and lifts off. The
 # holds are where the relaxation shows; the rests between them let the elastomer
 # recover. The probe presses between four taxels (x = y = 1.1 mm, half the 2.2 mm
-# pitch), so that four barometers see it, and always at that one spot: section 5's
-# lumped mode needs each taxel's response to depend on the depth alone.
+# pitch), so that four barometers see it. (Section 5 fits a log where the stage moves
+# the probe between presses, on a sensor with no model.)
 #
 # The trajectory is a CSV of stage waypoints (time, x, y, z of the probe tip, metres);
 # the stage moves linearly between them.
@@ -459,67 +460,66 @@ plt.show()
 display(Image(report["files"]["relaxation_png"], width=520))
 
 # %% [markdown]
-# ## 5. Lumped mode: a sensor nobody has modelled
+# ## 5. A sensor nobody has modelled: a stage log with moving presses
 #
 # Full mode needs a simulator of your sensor: a spec (mesh, taxel positions), the probe
-# and the pose. For a new sensor you may have none of that, only a column with the
-# **indentation** δ (here from the rig's CSV of section 1, through the mapping). Lumped
-# mode then replaces the simulated response of each channel by a power law
-# $a_c (\delta/\delta_{max})^{b_c}$, fitted along with the kernel (a flat punch like
-# this probe gives $b \approx 1$, a sphere, Hertz-like, nearer 1.5).
+# and the pose. For a new sensor you usually have none of that, only the rig's log: a
+# 2-axis stage moves the probe to a site, a third axis presses, and the log has the
+# stage's **travel** (not the depth: where the skin is touched is unknown, and differs
+# from press to press), its position, and the barometers. Such logs are messy: a
+# jittered ~16 Hz clock with gaps, pressures lagging the stage, baselines drifting by
+# hundreds of Pa, a channel clipping at the part's limit, one that never responds.
 #
-# The price: amplitude and modulus are now inseparable, so only the **shape** of the
-# relaxation is identifiable, $E(t)/E_\infty = 1 + \sum_i (E_i/E_\infty) e^{-t/\tau_i}$.
-# That is often what you need (the ratios and time constants; the scale comes from a
-# force measurement later). It also assumes each channel's response depends on δ
-# alone, which holds for presses at one spot, as in this recording.
+# `--lumped` (`fit_press_logs`) fits them with the lumped press model: each channel's
+# reading at a site is its own law of the depth (a sum of powers 1.5–3 of it) through
+# the relaxation, whose memory carries from press to press; each press's contact onset,
+# the lag and each channel's drifting baseline are fitted too. Amplitude and modulus
+# are inseparable without a model of the skin, so only the **shape** of the relaxation,
+# $E(t)/E_\infty = 1 + \sum_i (E_i/E_\infty) e^{-t/\tau_i}$, is identifiable: often
+# what you need (the scale comes from a force measurement later).
 #
-# Each channel brings its own amplitude and exponent, so give the lumped fit only the
-# channels that see the probe: a channel that never moves has no amplitude to find,
-# and its free parameters only stall the solver. The mapping below picks those columns
-# of the rig's CSV and names the sensor as nobody's spec (`rig-prototype`), as it
-# would be for your new sensor.
-#
-# We fit the number of terms full mode chose; it should give the same shape. Expect a
-# reduced χ² above 1: a power law of δ is only an approximation of how the contact
-# patch loads each taxel, and the misfit is many times the barometers' tiny noise.
+# Below, the simulator's stage-log stand-in (the curved `fingertip4` sensor, our truth
+# material) makes two logs: one to fit, and a held-out one with shallower, slower
+# presses and longer holds, which `compare` predicts from the fit with only its
+# baseline taken from the log itself.
 
 # %%
-from hydrotact.sysid import fit_problem
-
-lumped_mapping = dict(mapping, sensor="rig-prototype", description="The prototype: only the barometers under the probe, z in mm.")
-lumped_mapping["channels"] = [{"column": f"Sensor_{k}", "unit": "hPa", "name": channels[k]} for k in responsive]
-lumped_mapping["columns"] = {"indentation": mapping["columns"]["indentation"]}
-lumped_mapping.pop("probe")
-lumped_mapping_json = OUT / "prototype_mapping.json"
-lumped_mapping_json.write_text(json.dumps(lumped_mapping, indent=2))
-prototype_log = read_log(user_csv, lumped_mapping_json)
-print("prototype log columns:", ", ".join(prototype_log.columns))
+from hydrotact.sim import FINGERTIP_SENSOR, StageSession, make_site_grid, simulate_stage_log
+from hydrotact.sysid import compare_fit, fit_press_logs, write_press_fit_outputs
+from hydrotact.viz import plot_comparisons, plot_press_fit
 
 start = time.perf_counter()
-lumped_problem = make_fit_problem([prototype_log], mode="lumped", indentation="indentation", sources=[user_csv.name])
-lumped = fit_problem(lumped_problem, result.layout.num_terms, make_solver("lm"))
-print(f"lumped fit: {time.perf_counter() - start:.1f} s, converged {lumped.converged}, reduced χ² {lumped.reduced_chi_square:.3f}")
-full_relative = [(m.value / result.long_term_modulus.value, t.value) for m, t in result.terms]
-print(f"{'':<10}{'truth':>10}{'full':>10}{'lumped':>14}")
-for k, (ratio, tau) in enumerate(lumped.terms):
-    if k < len(TRUTH["taus"]) and k < len(full_relative):
-        print(f"{f'E{k + 1}/E∞':<10}{TRUTH['moduli'][k] / TRUTH['long_term_modulus']:>10.4f}{full_relative[k][0]:>10.4f}{ratio.value:>14.4f} ± {ratio.std:.2g}")
-        print(f"{f'τ{k + 1} [s]':<10}{TRUTH['taus'][k]:>10.4f}{full_relative[k][1]:>10.4f}{tau.value:>14.4f} ± {tau.std:.2g}")
-lumped_report = write_fit_outputs(lumped, OUT / "fit_lumped", paths=[str(user_csv)], plot=plot_fit)
-for label, response in lumped_report["elastic_response"].items():
-    print(f"{label}: amplitude {response['amplitude_Pa']['value'] / 1e3:.1f} kPa, exponent {response['exponent']['value']:.3f} ± {response['exponent']['std']:.2g}")
+stage = dict(sites=tuple(map(tuple, make_site_grid(2, 3, pitch=1e-3) if SMOKE else make_site_grid(4, 5, pitch=1e-3))), overload="f0", silent=("f3",))
+stage_logs = {}
+for name, settings in (("calibration", dict(stage, seed=1)), ("held_out", dict(stage, depth_range=(0.35e-3, 0.35e-3), hold_range=(12.0, 16.0), speed=0.5e-3, seed=2))):
+    stage_log, _ = simulate_stage_log(str(FINGERTIP_SENSOR), "sphere:r=2mm,subdivisions=2", truth_prony, StageSession(**settings), num_rays=NUM_RAYS)
+    stage_logs[name] = OUT / f"stage_{name}.parquet"
+    write_log(stage_logs[name], stage_log)
+    print(f"{name}: {stage_log.num_samples} samples, columns {', '.join(stage_log.columns)}")
+print(f"simulated in {time.perf_counter() - start:.0f} s")
+
+start = time.perf_counter()
+press_fit = fit_press_logs([read_log(stage_logs["calibration"])], [stage_logs["calibration"].name], terms=len(TRUTH["taus"]), estimate_lag=True, report=print)
+print(f"press fit: {time.perf_counter() - start:.1f} s, {press_fit.num_steps} steps, converged {press_fit.converged}, reduced χ² {press_fit.reduced_chi_square:.3f}")
+print(f"{'':<10}{'truth':>10}{'fitted':>22}")
+for k, (ratio, tau) in enumerate(zip(press_fit.ratios, press_fit.taus)):
+    print(f"{f'E{k + 1}/E∞':<10}{TRUTH['moduli'][k] / TRUTH['long_term_modulus']:>10.4f}{ratio.value:>12.4f} ± {ratio.std:.2g}")
+    print(f"{f'τ{k + 1} [s]':<10}{TRUTH['taus'][k]:>10.4f}{tau.value:>12.4f} ± {tau.std:.2g}")
+print(f"lag {press_fit.lags[0].value * 1e3:.0f} ± {press_fit.lags[0].std * 1e3:.1f} ms (the stand-in's: 50 ms)")
+press_report = write_press_fit_outputs(press_fit, OUT / "fit_press", paths=[str(stage_logs["calibration"])], plot=plot_press_fit)
+display(Image(press_report["files"]["traces_png"], width=760))
+
+# %% [markdown]
+# The held-out log, predicted from the fit (`hydrotact compare`): RMS and R² per channel,
+# and the RMS of the hold shapes (the relaxation), against the channel's noise.
 
 # %%
-figure, axis = plt.subplots(figsize=(6.5, 4))
-axis.semilogx(curve_times, np.asarray(truth_prony.calc_relaxation_modulus(curve_times)) / TRUTH["long_term_modulus"], "C3--", lw=1, label="truth")
-axis.semilogx(curve_times, np.asarray(result.prony.calc_relaxation_modulus(curve_times)) / result.long_term_modulus.value, "k", lw=1.2, label="full mode")
-axis.semilogx(curve_times, np.asarray(lumped.prony.calc_relaxation_modulus(curve_times)), "C0:", lw=2, label="lumped mode")
-axis.set_xlabel("time [s]")
-axis.set_ylabel("E(t) / E∞")
-axis.set_title("relaxation shape: full and lumped mode", fontsize=9)
-axis.legend(fontsize=8)
-plt.show()
+comparison = compare_fit(OUT / "fit_press", [stage_logs["held_out"]], OUT / "compare_press", plot=plot_comparisons)
+for name, numbers in comparison["logs"][0]["channels"].items():
+    print(f"{name}: RMS {numbers['rms_Pa']:.1f} Pa, R² {numbers['r2']:.4f}, hold shape RMS {numbers['hold_shape_rms_Pa']:.1f} Pa (noise {numbers['noise_Pa']:.1f} Pa)")
+for path in comparison["files"].values():
+    if str(path).endswith(".png"):
+        display(Image(path, width=760))
 
 # %% [markdown]
 # ## 6. Where next
@@ -536,8 +536,9 @@ plt.show()
 # On your own recordings, the same fits from the command line are
 #
 # ```
-# hydrotact fit recording.parquet -o fit                                        # full mode
-# hydrotact fit rig_log.csv --mapping prototype_mapping.json --lumped -o fit    # indentation only
+# hydrotact fit recording.parquet -o fit                                  # full mode
+# hydrotact fit stage_calibration.parquet --lumped --estimate-lag -o fit  # a stage log, no model of the sensor
+# hydrotact compare fit stage_held_out.parquet -o compare                 # predict a held-out log
 # ```
 #
 # Below, the fitted material read back and run through `hydrotact simulate` on the
