@@ -510,6 +510,16 @@ press_report = write_press_fit_outputs(press_fit, OUT / "fit_press", paths=[str(
 display(Image(press_report["files"]["traces_png"], width=760))
 
 # %% [markdown]
+# Read the warnings before the numbers. This material relaxes strongly (by 40 % over a
+# hold, with a third of it in 0.3 s), and on such logs the lumped press fit does not
+# yet reach the noise: its reduced χ² is far above 1 and the slow term's ratio comes
+# out low. The skin recovers by a lot between presses, so many samples start a press
+# with the contact not yet pushing, and the fit's way of finding where it pushes (two
+# least-squares passes) is the known weak spot (hydrotact issue 13). On the test
+# suite's stand-in, which relaxes ~20 %, the same fit recovers Eᵢ/E∞ and τᵢ within
+# their standard errors. A reduced χ² well above 1 is always reported as a warning,
+# on the console and in `report.json`.
+#
 # The held-out log, predicted from the fit (`hydrotact compare`): RMS and R² per channel,
 # and the RMS of the hold shapes (the relaxation), against the channel's noise.
 
