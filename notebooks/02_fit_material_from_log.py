@@ -515,7 +515,7 @@ display(Image(press_report["files"]["traces_png"], width=760))
 # yet reach the noise: its reduced χ² is far above 1 and the slow term's ratio comes
 # out low. The skin recovers by a lot between presses, so many samples start a press
 # with the contact not yet pushing, and the fit's way of finding where it pushes (two
-# least-squares passes) is the known weak spot (hydrotact issue 13). On the test
+# least-squares passes) is the likely weak spot (hydrotact issue 13). On the test
 # suite's stand-in, which relaxes ~20 %, the same fit recovers Eᵢ/E∞ and τᵢ within
 # their standard errors. A reduced χ² well above 1 is always reported as a warning,
 # on the console and in `report.json`.
