@@ -34,9 +34,10 @@ import scipy.optimize
 
 from hydrotact.data import read_log, write_log
 from hydrotact.sim import FINGERTIP_SENSOR, StageSession, simulate_stage_log
-from hydrotact.sysid._lumped import ACTIVE_PASSES, DEPTH_SCALE, LAG_BOUND, ONSET_HALF_RANGE, POWERS, RIDGE, PressLayout, press_residual_fn
+from hydrotact.sysid._lumped import ACTIVE_PASSES, LAG_BOUND, ONSET_HALF_RANGE, RIDGE, PressLayout, press_residual_fn
 from hydrotact.sysid._press_data import prepare_press_logs
 from hydrotact.sysid._press_fit import _initial_x, fit_press_logs
+from hydrotact.sysid._press_windows import DEPTH_SCALE, POWERS
 from hydrotact.visco import Prony
 
 MATERIAL = Prony(jnp.asarray(150e3), jnp.asarray([20e3, 15e3, 10e3]), jnp.asarray([0.4, 3.0, 20.0]))

@@ -6,8 +6,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from hydrotact.sysid._lumped import DEPTH_SCALE, POWERS, PressLayout, calc_bases, calc_depths, calc_press_jacobian, calc_press_predictions, calc_press_residuals, make_press_data, press_residual_fn
+from hydrotact.sysid._lumped import PressLayout, calc_press_jacobian, calc_press_predictions, calc_press_residuals, press_residual_fn
 from hydrotact.sysid._press_data import drift_basis
+from hydrotact.sysid._press_windows import DEPTH_SCALE, POWERS, calc_bases, calc_depths, make_press_data
 from hydrotact.sysid._solve import solve_least_squares
 from hydrotact.visco import Prony, calc_hereditary_integral
 

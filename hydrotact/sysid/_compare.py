@@ -28,8 +28,9 @@ import numpy as np
 from .._errors import HydrotactError
 from ..data import estimate_noise, read_material
 from ..visco import Prony
-from ._lumped import POWERS, calc_bases, calc_depths, make_press_data, solve_baselines
+from ._lumped import solve_baselines
 from ._press_data import DRIFT_KNOT_S, drift_basis, find_clipped, find_kinks, upper_limit
+from ._press_windows import POWERS, calc_bases, calc_depths, make_press_data
 from ._presses import SITE_TOLERANCE, find_log_presses
 from ._problem import _file_digest
 

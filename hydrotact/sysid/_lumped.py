@@ -44,149 +44,13 @@ exact one of the projected problem, is written by hand (:func:`calc_press_jacobi
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 
-from .._types import Array, Bool, Float, Int
-from ..visco import Prony, calc_kernel_responses_and_derivatives
+from ..visco import Prony
+from ._press_directions import lag_direction, make_log_terms, onset_directions, shape_directions
+from ._press_windows import PressData, calc_bases, calc_depths, log_windows
 
-DEPTH_SCALE = 1e-3  # m: δ is measured in millimetres in the law (amplitudes in Pa at 1 mm)
-POWERS = (1.5, 2.0, 2.5, 3.0)  # the law's powers of the depth (from Hertz's 1.5 up: see the docstring)
 ACTIVE_PASSES = 2  # solves that find where the elastic part is on, before the last
 RIDGE = 1e-12  # relative to the normal matrix' diagonal: keeps an unused site's amplitude at 0
-
-
-class PressData(eqx.Module):
-    """One log for the lumped press model (device arrays; build it with
-    :func:`make_press_data`).
-
-    **Fields:** `times` (T,) s; `travel` (T,) m; `press` (T,) the press of each
-    sample (-1 between presses); `press_site` (P,) the site of each press (the sites
-    are shared by all the logs of a fit); `observed` (T, C) Pa; `weights` (T, C)
-    1 / noise, 0 for masked samples; `baseline` (T, D) the basis of each channel's
-    slowly varying baseline (offset and drift: a constant, a line, or a cubic
-    B-spline); `num_sites` (static) the number of sites of the whole fit. Each
-    press's window, the samples its input is not 0 between (its own and one either
-    side), concatenated: `window` (W,) their sample indices, `window_press` (W,) and
-    `window_restart` (W,) whose window and where one starts; per press
-    `window_last` (P,) where its window ends in the concatenation.
-    """
-
-    times: Float[Array, " num_samples"]
-    travel: Float[Array, " num_samples"]
-    press: Int[Array, " num_samples"]
-    press_site: Int[Array, " num_presses"]
-    observed: Float[Array, "num_samples num_channels"]
-    weights: Float[Array, "num_samples num_channels"]
-    baseline: Float[Array, "num_samples num_baseline"]
-    window: Int[Array, " num_window"]
-    window_press: Int[Array, " num_window"]
-    window_restart: Bool[Array, " num_window"]
-    window_last: Int[Array, " num_presses"]
-    num_sites: int = eqx.field(static=True)
-
-
-def make_press_data(times, travel, press, press_site, observed, weights, baseline, num_sites: int) -> PressData:
-    """A :class:`PressData` from host arrays (as its fields), its press windows
-    found here: press p's input is 0 outside (first − 1, last + 1) of its samples
-    (linear between samples), so its hereditary integral is its window's, then a
-    free decay. A press without samples gets a one-sample window of 0 input."""
-    press = np.asarray(press)
-    num_samples, num_presses = len(press), len(press_site)
-    first, length, window, restart = np.zeros(num_presses, np.int64), np.ones(num_presses, np.int64), [], []
-    for p in range(num_presses):
-        samples = np.flatnonzero(press == p)
-        if len(samples):
-            first[p] = max(samples[0] - 1, 0)
-            length[p] = min(samples[-1] + 1, num_samples - 1) - first[p] + 1
-        window.append(np.arange(first[p], first[p] + length[p]))
-        restart.append(np.arange(length[p]) == 0)
-    window = np.concatenate(window) if window else np.zeros(0, np.int64)
-    restart = np.concatenate(restart) if restart else np.zeros(0, bool)
-    return PressData(
-        jnp.asarray(times), jnp.asarray(travel), jnp.asarray(press), jnp.asarray(press_site), jnp.asarray(observed), jnp.asarray(weights),
-        jnp.asarray(baseline), jnp.asarray(window), jnp.asarray(np.repeat(np.arange(num_presses), length)), jnp.asarray(restart),
-        jnp.asarray(np.cumsum(length) - 1), num_sites,
-    )
-
-
-def calc_depths(data: PressData, onsets, lag):
-    """(T,) δ(t) = (travel(t − lag) − onset of the sample's press)₊, 0 between presses."""
-    travel = jnp.interp(data.times - lag, data.times, data.travel)
-    inside = data.press >= 0
-    return jnp.where(inside, jnp.maximum(travel - onsets[jnp.maximum(data.press, 0)], 0.0), 0.0)
-
-
-class _Windows(eqx.Module):
-    """Each press's hereditary response to its own input, by windows (one log).
-
-    The input of press p is 0 outside its window, so its unit-modulus term
-    responses are those of one recursion over the concatenated windows (`inputs`
-    (W, C), `responses` (W, K, C), `derivatives` (W, K, C_d) in τ for the first C_d
-    columns), then a free decay after the window's last sample: g(t) = g(end) e^{−(t
-    − end)/τ} (`decay` (T, P, K), 0 up to the end), whose τ derivative is g'(end)
-    e^{−(t − end)/τ} + g(end) (t − end)/τ² e^{−(t − end)/τ} (`decay_tau`). A
-    quantity's value at sample t is thus its window values scattered to their
-    samples plus `decay` times its values at the ends: O(W + T P K) work and memory,
-    against O(T S K C) for the integral of the site-split input.
-    """
-
-    inputs: Float[Array, "num_window num_columns"]
-    responses: Float[Array, "num_window num_terms num_columns"]
-    derivatives: Float[Array, "num_window num_terms num_derived"]
-    decay: Float[Array, "num_samples num_presses num_terms"]
-    decay_tau: Float[Array, "num_samples num_presses num_terms"]
-
-    def at_ends(self, data: PressData, values):
-        """values (W, ...) at each press's last window sample (P, ...)."""
-        return values[data.window_last]
-
-
-def _press_windows(taus, data: PressData, values, num_derivatives: int = 0) -> _Windows:
-    """:class:`_Windows` for the per-sample inputs `values` (T, C) (each sample's
-    value belongs to its own press), with the τ derivatives of the first
-    `num_derivatives` columns."""
-    own = data.press[data.window] == data.window_press
-    inputs = jnp.where(own[:, None], values[data.window], 0.0)  # (W, C)
-    responses, derivatives = calc_kernel_responses_and_derivatives(
-        taus, data.times[data.window], inputs, restarts=data.window_restart, with_derivatives=num_derivatives > 0
-    )
-    end = data.times[data.window[data.window_last]]  # (P,)
-    elapsed = data.times[:, None] - end[None, :]  # (T, P)
-    after = elapsed > 0.0
-    scaled = jnp.where(after, elapsed, 0.0)[:, :, None] / taus[None, None, :]  # (T, P, K)
-    decay = jnp.where(after[:, :, None], jnp.exp(-scaled), 0.0)
-    derivatives = derivatives[:, :, :num_derivatives] if num_derivatives else jnp.zeros((*responses.shape[:2], 0), responses.dtype)
-    return _Windows(inputs, responses, derivatives, decay, decay * scaled / taus[None, None, :])
-
-
-def _to_sites(data: PressData, window_values, num_samples):
-    """(T, S, ...) window values (W, ...) summed onto their samples at their press's site."""
-    site = data.press_site[data.window_press]
-    return jnp.zeros((num_samples, data.num_sites) + window_values.shape[1:], window_values.dtype).at[data.window, site].add(window_values)
-
-
-def _press_site(data: PressData, dtype):
-    """(P, S) which site each press is at."""
-    return (data.press_site[:, None] == jnp.arange(data.num_sites)[None, :]).astype(dtype)
-
-
-def _site_bases(shape: Prony, inputs, windows: _Windows, data: PressData, num_powers: int):
-    """(T, S, J) the bases from the windows of the law's columns (the first J)."""
-    moduli = shape.moduli
-    num_samples = inputs.shape[0]
-    law = jnp.einsum("wkj,k->wj", windows.responses[:, :, :num_powers], moduli)
-    ends = windows.at_ends(data, windows.responses[:, :, :num_powers]) * moduli[None, :, None]  # (P, K, J)
-    by_site = jnp.einsum("pkj,ps->pksj", ends, _press_site(data, ends.dtype)).reshape(-1, data.num_sites * num_powers)
-    tails = (windows.decay.reshape(num_samples, -1) @ by_site).reshape(inputs.shape)
-    return shape.long_term_modulus * inputs + _to_sites(data, law, num_samples) + tails
-
-
-def calc_bases(shape: Prony, depths, data: PressData):
-    """(T, S, J) the bases B_{s,j}: the hereditary integrals of the powers of the
-    depth, split by site (their memory runs on between presses)."""
-    inputs, _, _ = _law_inputs(depths, data)
-    windows = _press_windows(shape.taus, data, jnp.sum(inputs, axis=1))
-    return _site_bases(shape, inputs, windows, data, inputs.shape[2])
 
 
 def _assemble(bases, datas, actives):
@@ -275,115 +139,6 @@ def _solve_linear(bases, datas, actives):
     return drifts, amplitudes, residuals, (weighted, blocks, factors, scale)
 
 
-def _law_inputs(depths, data: PressData):
-    """(T, S, J) the site-split inputs (δ/δ_ref)^p, (T, J) their derivative in δ
-    (per m), and (T, S) each sample's site."""
-    powers = jnp.asarray(POWERS)
-    positive = depths > 0.0
-    scaled = jnp.where(positive, depths / DEPTH_SCALE, 1.0)
-    law = jnp.where(positive[:, None], scaled[:, None] ** powers[None, :], 0.0)
-    slope = jnp.where(positive[:, None], powers[None, :] * scaled[:, None] ** (powers[None, :] - 1.0) / DEPTH_SCALE, 0.0)
-    site = jnp.where(data.press >= 0, data.press_site[jnp.maximum(data.press, 0)], -1)
-    by_site = (site[:, None] == jnp.arange(data.num_sites)[None, :]).astype(law.dtype)  # (T, S)
-    return by_site[:, :, None] * law[:, None, :], slope, by_site
-
-
-def _log_windows(shape: Prony, onsets, lag, data: PressData, with_lag: bool):
-    """One log's bases (T, S, J), the :class:`_Windows` of the columns its
-    derivatives need, and the contact (T,). Columns (J each): the law (δ/δ_ref)^p;
-    its derivative in the sample's own press's onset, −∂(δ/δ_ref)^p/∂δ (∂δ/∂onset_p
-    = −[press p] in contact); with `with_lag`, in the lag, −travel'(t − lag) times
-    the same. ∂B/∂log gᵢ = gᵢ hᵢ and ∂B/∂log τᵢ = gᵢ τᵢ ∂hᵢ/∂τᵢ come from the law's
-    term responses hᵢ."""
-    depths = calc_depths(data, onsets, lag)
-    inputs, slope, _ = _law_inputs(depths, data)
-    num_samples, _, num_powers = inputs.shape
-    columns = [jnp.sum(inputs, axis=1), -slope]  # each sample's own press's values (T, J)
-    if with_lag:
-        shifted = data.times - lag
-        index = jnp.clip(jnp.searchsorted(data.times, shifted, side="right") - 1, 0, num_samples - 2)
-        speed = (data.travel[index + 1] - data.travel[index]) / (data.times[index + 1] - data.times[index])
-        speed = jnp.where((shifted > data.times[0]) & (shifted < data.times[-1]), speed, 0.0)
-        columns.append(-speed[:, None] * slope)
-    windows = _press_windows(shape.taus, data, jnp.concatenate(columns, axis=1), num_derivatives=num_powers)
-    return _site_bases(shape, inputs, windows, data, num_powers), windows, depths > 0.0
-
-
-def _shape_directions(shape: Prony, windows: _Windows, data: PressData, amplitudes, on, weighted_residual):
-    """Per log, for the directions log gᵢ then log τᵢ (2K): v = −dB·A on the active
-    samples (2K, C, T) and dBᵀ r (2K, C, S J), from the law's windows and their ends
-    (no (T, S, J) array per direction)."""
-    num_channels, num_sites, num_powers = amplitudes.shape
-    moduli, taus = shape.moduli, shape.taus
-    law, slope = windows.responses[:, :, :num_powers], windows.derivatives  # (W, K, J)
-    ends, end_slopes = windows.at_ends(data, law), windows.at_ends(data, slope)  # (P, K, J)
-    by_window = amplitudes[:, data.press_site[data.window_press], :]  # (C, W, J)
-    by_press = amplitudes[:, data.press_site, :]  # (C, P, J)
-    press_site = _press_site(data, law.dtype)
-    window_site = press_site[data.window_press]  # (W, S)
-    residual_window = weighted_residual[:, data.window]  # (C, W)
-    decayed = jnp.einsum("tpk,ct->pkc", windows.decay, weighted_residual)
-    decayed_tau = jnp.einsum("tpk,ct->pkc", windows.decay_tau, weighted_residual)
-
-    def at_samples(window_part, tail):  # (K, C, W), (K, C, T) -> (K, C, T)
-        return jnp.zeros(tail.shape, tail.dtype).at[:, :, data.window].add(window_part) + tail
-
-    ratio_tail = jnp.einsum("tpk,pkc->kct", windows.decay, jnp.einsum("pkj,cpj->pkc", ends, by_press))
-    ratio = at_samples(jnp.einsum("wkj,cwj->kcw", law, by_window), ratio_tail) * moduli[:, None, None]
-    ends_tail = jnp.einsum("tpk,pkc->kct", windows.decay, jnp.einsum("pkj,cpj->pkc", end_slopes, by_press))
-    tau_tail = ends_tail + jnp.einsum("tpk,pkc->kct", windows.decay_tau, jnp.einsum("pkj,cpj->pkc", ends, by_press))
-    tau = at_samples(jnp.einsum("wkj,cwj->kcw", slope, by_window), tau_tail) * (moduli * taus)[:, None, None]
-    vectors = -jnp.concatenate([ratio, tau], axis=0) * on[None]
-    extra_ratio = jnp.einsum("wkj,cw,ws->kcsj", law, residual_window, window_site) + jnp.einsum("pkj,pkc,ps->kcsj", ends, decayed, press_site)
-    extra_tau = (
-        jnp.einsum("wkj,cw,ws->kcsj", slope, residual_window, window_site)
-        + jnp.einsum("pkj,pkc,ps->kcsj", end_slopes, decayed, press_site)
-        + jnp.einsum("pkj,pkc,ps->kcsj", ends, decayed_tau, press_site)
-    )
-    extra = jnp.concatenate([extra_ratio * moduli[:, None, None, None], extra_tau * (moduli * taus)[:, None, None, None]], axis=0)
-    return vectors, extra.reshape(extra.shape[0], num_channels, num_sites * num_powers)
-
-
-def _column_responses(shape: Prony, windows: _Windows, data: PressData, columns: slice):
-    """The hereditary response of the given input columns in each press's window (W,
-    J) and at its end per term (P, K, J), moduli applied."""
-    within = shape.long_term_modulus * windows.inputs[:, columns] + jnp.einsum("wkj,k->wj", windows.responses[:, :, columns], shape.moduli)
-    return within, windows.at_ends(data, windows.responses[:, :, columns]) * shape.moduli[None, :, None]
-
-
-def _onset_directions(shape: Prony, windows: _Windows, data: PressData, amplitudes, on, weighted_residual, num_powers: int):
-    """Per log, each press's onset direction: v (P, C, T) and dBᵀ r (P, C, J) at
-    the press's own site (an onset moves only its own press's depth)."""
-    within, ends = _column_responses(shape, windows, data, slice(num_powers, 2 * num_powers))
-    by_window = amplitudes[:, data.press_site[data.window_press], :]  # (C, W, J)
-    by_press = amplitudes[:, data.press_site, :]
-    num_presses = ends.shape[0]
-    num_samples = on.shape[1]
-    window_part = jnp.einsum("wj,cwj->wc", within, by_window)
-    at_samples = jnp.zeros((num_presses, num_samples, on.shape[0]), within.dtype).at[data.window_press, data.window].add(window_part)
-    tail = jnp.einsum("tpk,pkc->pct", windows.decay, jnp.einsum("pkj,cpj->pkc", ends, by_press))
-    vectors = -(jnp.transpose(at_samples, (0, 2, 1)) + tail) * on[None]
-    residual_window = weighted_residual[:, data.window].T  # (W, C)
-    own = jax.ops.segment_sum(within[:, None, :] * residual_window[:, :, None], data.window_press, num_segments=num_presses)  # (P, C, J)
-    decayed = jnp.einsum("tpk,ct->pkc", windows.decay, weighted_residual)
-    return vectors, own + jnp.einsum("pkj,pkc->pcj", ends, decayed)
-
-
-def _lag_direction(shape: Prony, windows: _Windows, data: PressData, amplitudes, on, weighted_residual, num_powers: int):
-    """Per log, the lag's direction: v (C, T) and dBᵀ r (C, S J)."""
-    num_channels, num_sites, _ = amplitudes.shape
-    within, ends = _column_responses(shape, windows, data, slice(2 * num_powers, 3 * num_powers))
-    by_window = amplitudes[:, data.press_site[data.window_press], :]
-    by_press = amplitudes[:, data.press_site, :]
-    window_part = jnp.einsum("wj,cwj->cw", within, by_window)
-    tail = jnp.einsum("tpk,pkc->ct", windows.decay, jnp.einsum("pkj,cpj->pkc", ends, by_press))
-    vector = -(jnp.zeros(tail.shape, tail.dtype).at[:, data.window].add(window_part) + tail) * on
-    press_site = _press_site(data, within.dtype)
-    decayed = jnp.einsum("tpk,ct->pkc", windows.decay, weighted_residual)
-    extra = jnp.einsum("wj,cw,ws->csj", within, weighted_residual[:, data.window], press_site[data.window_press]) + jnp.einsum("pkj,pkc,ps->csj", ends, decayed, press_site)
-    return vector, extra.reshape(num_channels, num_sites * within.shape[1])
-
-
 def _find_actives(bases, contact, datas):
     """Per log (T, C): where each channel's elastic part is on. The amplitudes are
     solved over the contact, then over where that solution is positive, ACTIVE_PASSES
@@ -452,7 +207,7 @@ def calc_press_jacobian(layout: "PressLayout", x, args, linear: bool = False):
     datas, starts, given_lags = args
     shape, onsets, lags = layout.unpack(x, starts, given_lags)
     k = layout.num_terms
-    pieces = [_log_windows(shape, onset, jnp.asarray(lag, x.dtype), data, layout.estimate_lag) for data, onset, lag in zip(datas, onsets, lags)]
+    pieces = [log_windows(shape, onset, jnp.asarray(lag, x.dtype), data, layout.estimate_lag) for data, onset, lag in zip(datas, onsets, lags)]
     bases = [piece[0] for piece in pieces]
     actives = _find_actives(bases, [piece[2] for piece in pieces], datas)
     _, amplitudes, residuals, (weighted, blocks, factors, scale) = _solve_linear(bases, datas, actives)
@@ -462,23 +217,21 @@ def calc_press_jacobian(layout: "PressLayout", x, args, linear: bool = False):
     first_lag = 2 * k + sum(layout.num_presses)
     vectors, extra = [], jnp.zeros((size, num_channels, num_sites * num_powers), x.dtype)
     for log, ((_, windows, _), data, active, residual) in enumerate(zip(pieces, datas, actives, residuals)):
-        on = (data.weights * active).T  # (C, T)
-        weighted_residual = on * residual.T
+        terms = make_log_terms(windows, data, amplitudes, (data.weights * active).T, residual)
         num_presses = layout.num_presses[log]
-        vector = jnp.zeros((size, num_channels, on.shape[1]), x.dtype)
-        shape_vectors, shape_extra = _shape_directions(shape, windows, data, amplitudes, on, weighted_residual)
+        vector = jnp.zeros((size, num_channels, terms.on.shape[1]), x.dtype)
+        shape_vectors, shape_extra = shape_directions(shape, windows, data, terms)
         vector = vector.at[: 2 * k].set(shape_vectors)
         extra = extra.at[: 2 * k].add(shape_extra)
         # chain rule through x: exp for the shape (in the directions already), tanh for onsets and lag
         onset_scale = ONSET_HALF_RANGE * (1.0 - jnp.tanh(x[first_onset : first_onset + num_presses]) ** 2)
-        onset_vectors, by_press = _onset_directions(shape, windows, data, amplitudes, on, weighted_residual, num_powers)
+        onset_vectors, by_press = onset_directions(shape, windows, data, terms)
         vector = vector.at[first_onset : first_onset + num_presses].set(onset_vectors * onset_scale[:, None, None])
-        press_site = _press_site(data, x.dtype)  # (P, S)
         by_press = by_press * onset_scale[:, None, None]
-        extra = extra.at[first_onset : first_onset + num_presses].add((by_press[:, :, None, :] * press_site[:, None, :, None]).reshape(num_presses, num_channels, -1))
+        extra = extra.at[first_onset : first_onset + num_presses].add((by_press[:, :, None, :] * terms.press_site[:, None, :, None]).reshape(num_presses, num_channels, -1))
         if layout.estimate_lag:
             lag_scale = LAG_BOUND * (1.0 - jnp.tanh(x[first_lag + log]) ** 2)
-            lag_vector, lag_extra = _lag_direction(shape, windows, data, amplitudes, on, weighted_residual, num_powers)
+            lag_vector, lag_extra = lag_direction(shape, windows, data, terms)
             vector = vector.at[first_lag + log].set(lag_vector * lag_scale)
             extra = extra.at[first_lag + log].add(lag_extra * lag_scale)
         vectors.append(vector)

@@ -16,7 +16,8 @@ import numpy as np
 from .._errors import HydrotactError
 from ..data import estimate_noise
 from ..data._table import sensor_spec
-from ._lumped import ONSET_HALF_RANGE, PressData, make_press_data
+from ._lumped import ONSET_HALF_RANGE
+from ._press_windows import PressData, make_press_data
 from ._presses import GAP_FACTOR, POSITION_COLUMNS, PRESS_THRESHOLD, SITE_TOLERANCE, find_log_presses
 
 DRIFT_KNOT_S = 30.0  # s between the baseline spline's knots: slower than any relaxation we fit

@@ -36,13 +36,13 @@ from .._errors import HydrotactError
 from ._lumped import (
     LAG_BOUND,
     ONSET_HALF_RANGE,
-    POWERS,
     PressLayout,
     calc_press_jacobian,
     press_residual_fn,
     solve_baselines,
 )
 from ._press_data import DRIFT_KNOT_S, PressLog, prepare_press_logs
+from ._press_windows import POWERS
 from ._presses import POSITION_COLUMNS, PRESS_THRESHOLD
 from ._solve import make_solver, solve_least_squares, solver_name
 

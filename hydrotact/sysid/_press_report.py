@@ -6,8 +6,8 @@ import numpy as np
 
 from .. import __version__
 from ..data import make_material_document
-from ._lumped import DEPTH_SCALE, POWERS
 from ._press_fit import PressFit
+from ._press_windows import DEPTH_SCALE, POWERS
 from ._problem import _file_digest
 from ._report import write_outputs
 
