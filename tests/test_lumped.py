@@ -2,6 +2,7 @@
 projection recovers the linear parameters at the truth, misplaced onsets or lag
 show, and Levenberg-Marquardt recovers the shape, onsets and lag."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -120,10 +121,13 @@ def test_the_hand_jacobian_is_autodiffs_through_the_projection():
     two logs (shared shape, own onsets and lags) away from the truth. They agree to
     the projection's round-off (the powers are nearly collinear: ~1e-4 of a column's
     largest entry); a wrong term, a lost chain factor or another log's column would
-    be off by O(1)."""
+    be off by O(1). Channel 0's law at site 1 is fixed at 0 (as for a barometer that
+    does not respond there): it stays 0, and its derivative too."""
     rng = np.random.default_rng(2)
     logs = [_model_log(rng, 700, 4, 3, 2, 6.0), _model_log(rng, 600, 3, 3, 2, 5.0)]
-    datas = tuple(log[0] for log in logs)
+    responds = np.ones((2, 3), bool)
+    responds[0, 1] = False
+    datas = tuple(eqx.tree_at(lambda data: data.responds, log[0], jnp.asarray(responds)) for log in logs)
     layout = PressLayout(2, (4, 3), True)
     starts = tuple(jnp.asarray(log[1] + rng.uniform(-50e-6, 50e-6, len(log[1]))) for log in logs)
     args = (datas, starts, (0.0, 0.0))
@@ -134,6 +138,9 @@ def test_the_hand_jacobian_is_autodiffs_through_the_projection():
 
     value, jacobian = jax.jit(lambda x: calc_press_jacobian(layout, x, args))(x)
     reference = jax.jit(jax.jacfwd(plain))(x)
+    amplitudes = jax.jit(lambda x: calc_press_residuals(*layout.unpack(x, starts, (0.0, 0.0)), datas)[2])
+    assert np.all(np.asarray(amplitudes(x))[0, 1] == 0.0) and np.all(np.asarray(amplitudes(x))[1, 1] != 0.0)
+    assert np.all(np.asarray(jax.jacfwd(amplitudes)(x))[0, 1] == 0.0)
     np.testing.assert_allclose(np.asarray(value), np.asarray(jax.jit(plain)(x)), atol=1e-4)
     scale = np.abs(np.asarray(reference)).max(axis=0)
     assert np.all(scale > 0.0)

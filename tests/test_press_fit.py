@@ -8,6 +8,7 @@ the onset everywhere), as do the held-out ones, so each set is simulated once an
 the unit-response cache serves the rest."""
 
 import json
+from types import SimpleNamespace
 
 import jax.numpy as jnp
 import numpy as np
@@ -19,6 +20,7 @@ from hydrotact.cli import main
 from hydrotact.data import write_log
 from hydrotact.sim import FINGERTIP_SENSOR, StageSession, make_site_grid, simulate_stage_log
 from hydrotact.sysid import compare_fit, fit_press_logs, write_press_fit_outputs
+from hydrotact.sysid._press_data import SITE_RESPONSE_SNR, site_responses
 from hydrotact.visco import Prony
 
 MATERIAL = Prony(jnp.asarray(150e3), jnp.asarray([18e3, 22e3]), jnp.asarray([0.5, 5.0]))
@@ -88,6 +90,16 @@ def test_one_log_recovers_the_shape_onsets_and_lag(one_log_fit):
     assert any("clipped" in message and "f0" in message for message in messages)
 
 
+def test_a_law_is_fitted_only_where_the_channel_responds():
+    """Per (channel, site): fitted when the channel moves more than SITE_RESPONSE_SNR
+    noise stds in some press there, in some log; a hold the channel was clipped
+    through (NaN: unknown) counts as a response."""
+    first = SimpleNamespace(noise=np.ones(3), press_site=np.array([0, 1, 0]), responses=np.array([[50.0, 0.5, 2.9], [1.0, np.nan, 0.2], [0.3, 0.1, 0.0]]))
+    second = SimpleNamespace(noise=np.ones(3), press_site=np.array([2]), responses=np.array([[0.0, 0.0, SITE_RESPONSE_SNR + 0.1]]))
+    expected = np.array([[True, False, False], [False, True, False], [False, False, True]])  # (C, S)
+    np.testing.assert_array_equal(site_responses([first, second], 3), expected)
+
+
 def test_masked_samples_change_nothing(one_log_fit, stand_in):
     """Perturb every sample the fit masked (clipped, at stage kinks): same fit."""
     fit, _, _ = one_log_fit
@@ -109,6 +121,9 @@ def test_calibrate_on_three_and_compare_three(stand_in, tmp_path):
     calibration = stand_in["calibration"]
     fit = fit_press_logs([log for _, log, _ in calibration], [str(path) for path, _, _ in calibration], terms=2, estimate_lag=True)
     assert fit.converged and fit.reduced_chi_square < 1.3
+    # The model's own χ² (compare's) against the projection's the solver minimised:
+    # they differ only where the push starts or ends at the final amplitudes (2 % here).
+    assert abs(fit.chi_square / fit.solver_chi_square - 1.0) < 0.1
     report = write_press_fit_outputs(fit, tmp_path / "fit", paths=[str(path) for path, _, _ in calibration])
     material = json.loads((tmp_path / "fit" / "material.json").read_text())
     assert material["modulus_scale"] == "relative" and material["channel_law"]["channels"] == ["f0", "f1", "f2"]
@@ -119,12 +134,12 @@ def test_calibrate_on_three_and_compare_three(stand_in, tmp_path):
     assert any("uneven sampling" in message for message in messages)
     for entry in result["logs"]:
         for name, channel in entry["channels"].items():
-            # The relaxation's shape over each hold within 1.5 x the readings' noise.
-            # The levels (depths and speeds the fit never saw, each log's baseline from
-            # its rests alone) are not yet within the noise: 1.6-3.9 x on these logs
-            # (issue 13, open); checked only to stay under 5 x.
+            # The relaxation's shape over each hold within 1.5 x the readings' noise,
+            # the whole log within 2.5 x: at depths and speeds the fit never saw, each
+            # log's baseline from its own unloaded samples, 1.0-1.5 x on f0 and f1,
+            # 1.8-2.1 x on f2, whose law at 0.35 mm is too weak at one site.
             assert channel["hold_shape_rms_Pa"] < 1.5 * channel["noise_Pa"], (entry["source"], name, channel)
-            assert channel["rms_Pa"] < 5.0 * channel["noise_Pa"], (entry["source"], name, channel)
+            assert channel["rms_Pa"] < 2.5 * channel["noise_Pa"], (entry["source"], name, channel)
             assert channel["r2"] > 0.99  # a channel that barely moves has an R² near its noise
     # On the fit's own logs, with the baseline solved over all their samples (the
     # fit's own baseline, given its laws): the fit's residuals, sample by sample.

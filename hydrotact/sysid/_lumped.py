@@ -70,7 +70,7 @@ def _assemble(bases, datas, actives):
         weights = data.weights.T  # (C, T)
         drift = data.baseline[None, :, :] * weights[:, :, None]  # (C, T, D)
         columns = basis.reshape(basis.shape[0], -1)  # (T, S J)
-        sites = columns[None, :, :] * (weights * active.T)[:, :, None]  # (C, T, S J)
+        sites = columns[None, :, :] * (weights * active.T)[:, :, None] * _responding_columns(data, num_powers)[:, None, :]  # (C, T, S J)
         target = data.observed.T * weights  # (C, T)
         weighted.append((drift, sites, target))
         low, high = first[k], first[k] + sizes[k]
@@ -82,6 +82,11 @@ def _assemble(bases, datas, actives):
         rhs = rhs.at[:, low:high].set(jnp.einsum("ctd,ct->cd", drift, target))
         rhs = rhs.at[:, num_baseline:].add(jnp.einsum("cts,ct->cs", sites, target))
     return weighted, (sizes, first, num_baseline), normal, rhs
+
+
+def _responding_columns(data, num_powers):
+    """(C, S J) 1 where the channel's law at the site is fitted, 0 where it is fixed at 0."""
+    return jnp.repeat(data.responds, num_powers, axis=1).astype(data.weights.dtype)
 
 
 def _factor(normal):
@@ -241,7 +246,7 @@ def calc_press_jacobian(layout: "PressLayout", x, args, linear: bool = False):
     for log, ((drift, sites, _), vector) in enumerate(zip(weighted, vectors)):
         rhs = rhs.at[:, :, first[log] : first[log] + sizes[log]].set(jnp.einsum("ctd,mct->mcd", drift, vector))
         rhs = rhs.at[:, :, num_baseline:].add(jnp.einsum("cts,mct->mcs", sites, vector))
-    rhs = rhs.at[:, :, num_baseline:].add(extra)
+    rhs = rhs.at[:, :, num_baseline:].add(extra * _responding_columns(datas[0], num_powers)[None])  # a law fixed at 0 stays there
     step = jax.vmap(_apply_inverse, in_axes=(None, None, 0))(factors, scale, rhs)  # (M, C, N)
     columns = []
     for log, ((drift, sites, _), vector) in enumerate(zip(weighted, vectors)):

@@ -22,6 +22,7 @@ from ._presses import GAP_FACTOR, POSITION_COLUMNS, PRESS_THRESHOLD, SITE_TOLERA
 
 DRIFT_KNOT_S = 30.0  # s between the baseline spline's knots: slower than any relaxation we fit
 RESPONSE_SNR = 20.0  # a channel responds to a press when it moves this many noise stds
+SITE_RESPONSE_SNR = 3.0  # a channel's law at a site is fitted where it moves this many noise stds there
 FLAT_TOP_SAMPLES = 3  # a channel's maximum held this many times is its clip level
 MIN_SAMPLES = 8  # a log shorter than this holds no press to fit
 KINK_FRACTION = 0.3  # a change of the stage's speed above this of its top speed is a kink
@@ -125,10 +126,25 @@ class PressLog:
     onset_start: np.ndarray
     clipped: np.ndarray
     t0: float
+    responses: np.ndarray
 
-    def to_data(self, num_sites: int) -> PressData:
+    def to_data(self, num_sites: int, responds=None) -> PressData:
         weights = np.where(self.mask, 1.0 / self.noise[None, :], 0.0)
-        return make_press_data(self.times, self.travel, self.press, self.press_site, self.observed, weights, self.baseline, num_sites)
+        return make_press_data(self.times, self.travel, self.press, self.press_site, self.observed, weights, self.baseline, num_sites, responds)
+
+
+def site_responses(logs: list, num_sites: int) -> np.ndarray:
+    """(C, S) whether each channel responds at each site: it moves more than
+    SITE_RESPONSE_SNR noise stds in some press at the site, in some log. Elsewhere
+    its law is fixed at 0: a barometer far from a press reads only noise there, and a
+    law of four powers fitted to noise is any shape — where the push max(0, ·) cuts it
+    off, the projection leaves it free, and it pushes by tens of Pa where the fit never
+    looked (a held-out log, or the model's own residuals)."""
+    responds = np.zeros((len(logs[0].noise), num_sites), dtype=bool)
+    for log in logs:
+        for p, site in enumerate(log.press_site):
+            responds[:, site] |= ~(log.responses[p] <= SITE_RESPONSE_SNR)  # unknown (clipped over the hold): fitted
+    return responds
 
 
 def _level(values) -> np.ndarray:
@@ -139,22 +155,24 @@ def _level(values) -> np.ndarray:
 
 
 def _responses(observed, travel, times, presses, noise) -> np.ndarray:
-    """(P, C) each press's step in each channel, in noise stds: the level at the
-    start of the hold (the first samples within 5 % of the press's deepest travel)
-    against the line through the levels just before and just after the press (the
-    baseline drifts: over a 20 s hold by more than a far channel's step). `observed`
-    holds NaN where masked. Presses that began in a gap count 0."""
+    """(P, C) each press's step in each channel, in noise stds: the median level over
+    the hold (the samples within 5 % of the press's deepest travel; the ramps' ends are
+    masked as kinks, so no fixed few samples will do) against the line through the
+    levels just before and just after the press (the baseline drifts: over a 20 s
+    hold by more than a far channel's step). `observed` holds NaN where masked.
+    Presses that began in a gap count 0; a channel masked over a whole hold (clipped)
+    is NaN: unknown."""
     out = np.zeros((presses.num_presses, observed.shape[1]))
     for p, (start, end) in enumerate(zip(presses.starts, presses.ends)):
         if presses.unseen[p]:
             continue
         before = _level(observed[max(start - 4, 0) : max(start, 1)])
         after = _level(observed[min(end, len(observed) - 1) : end + 4])
-        deep = start + np.flatnonzero(travel[start:end] >= travel[start] + 0.95 * (np.max(travel[start:end]) - travel[start]))[:4]
+        deep = start + np.flatnonzero(travel[start:end] >= travel[start] + 0.95 * (np.max(travel[start:end]) - travel[start]))
         fraction = (np.mean(deep) - (start - 1)) / max(end - start + 1, 1)
         if np.any(np.diff(times[int(deep[-1]) : end + 4]) > GAP_FACTOR * np.median(np.diff(times))):
             fraction = 0.0  # the press's end fell into a gap: its level after is minutes of drift away
-        out[p] = np.nan_to_num(np.abs(_level(observed[deep]) - (before + fraction * (after - before))) / noise, nan=0.0)
+        out[p] = np.abs(_level(observed[deep]) - (before + fraction * (after - before))) / noise
     return out
 
 
@@ -257,9 +275,10 @@ def prepare_press_logs(
         masked = clipped | find_kinks(log.times, travel)[:, None]
         noise = np.array([estimate_noise(observed[~masked[:, c], c : c + 1])[0] for c in range(observed.shape[1])])
         usable = np.where(masked, np.nan, observed)
-        log_responding = _responses(usable, travel, np.asarray(log.times, dtype=np.float64), presses, noise).max(axis=0, initial=0.0) > RESPONSE_SNR
+        responses = _responses(usable, travel, np.asarray(log.times, dtype=np.float64), presses, noise)
+        log_responding = np.nan_to_num(responses, nan=0.0).max(axis=0, initial=0.0) > RESPONSE_SNR
         responding |= log_responding
-        staged.append((log, source, presses, site_ids, observed, clipped, masked, noise, log_responding))
+        staged.append((log, source, presses, site_ids, observed, clipped, masked, noise, log_responding, responses))
     for c, name in enumerate(channels):
         if not responding[c]:
             skipped[name] = f"channel {name!r} moves less than {RESPONSE_SNR:g} noise stds in every press: not fitted"
@@ -268,7 +287,7 @@ def prepare_press_logs(
         raise HydrotactError("no channel responds to the presses in any log (each moves less than " f"{RESPONSE_SNR:g} noise stds): nothing to fit")
     fitted = np.flatnonzero(responding)
     out = []
-    for log, source, presses, site_ids, observed, clipped, masked, noise, log_responding in staged:
+    for log, source, presses, site_ids, observed, clipped, masked, noise, log_responding, responses in staged:
         if not log_responding[fitted].any():
             skipped[source] = f"no channel responds to its presses (each moves less than {RESPONSE_SNR:g} noise stds)"
             report(f"{source}: skipped: {skipped[source]}")
@@ -283,7 +302,7 @@ def prepare_press_logs(
         out.append(PressLog(
             source=source, times=times - times[0], travel=travel, press=seen.press_of_samples(log.num_samples), press_site=site_ids[~presses.unseen],
             observed=observed[:, fitted], mask=mask, noise=noise[fitted], baseline=drift_basis(times, drift), onset_start=onset_start,
-            clipped=clipped[:, fitted].sum(axis=0), t0=float(times[0]),
+            clipped=clipped[:, fitted].sum(axis=0), t0=float(times[0]), responses=responses[~presses.unseen][:, fitted],
         ))
         if clipped[:, fitted].any():
             counts = ", ".join(f"{channels[c]} {n}" for c, n in zip(fitted, clipped[:, fitted].sum(axis=0)) if n)

@@ -41,7 +41,7 @@ from ._lumped import (
     press_residual_fn,
     solve_baselines,
 )
-from ._press_data import DRIFT_KNOT_S, PressLog, prepare_press_logs
+from ._press_data import DRIFT_KNOT_S, PressLog, prepare_press_logs, site_responses
 from ._press_windows import POWERS
 from ._presses import POSITION_COLUMNS, PRESS_THRESHOLD
 from ._solve import make_solver, solve_least_squares, solver_name
@@ -77,7 +77,10 @@ class PressFit:
     travel); `onsets` per log (P_l,) m; `onset_stds` per log; `lags` per log
     [Parameter]; `baselines` per log (C, D); `channels` fitted; `skipped` {name:
     reason} for channels and logs left out; `logs` the PressLogs; `residuals` per log
-    (T, C) weighted (0 where masked); `chi_square`, `dof`, `converged`, `num_steps`,
+    (T, C) weighted (0 where masked); `chi_square` the model's own (as `compare`
+    predicts), `solver_chi_square` the projection's the solver minimised (which finds
+    where the push max(0, ·) is on from a pass before; the two differ by where the
+    push starts or ends at the final amplitudes), `dof`, `converged`, `num_steps`,
     `solver`, `drift`, `warnings` [str]; `num_terms`.
     """
 
@@ -95,6 +98,7 @@ class PressFit:
     logs: list
     residuals: list
     chi_square: float
+    solver_chi_square: float
     dof: int
     converged: bool
     num_steps: int
@@ -169,7 +173,8 @@ def _press_outputs(layout, x, args):
 
 def _fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps):
     layout = PressLayout(num_terms, tuple(len(log.onset_start) for log in logs), estimate_lag)
-    datas = tuple(log.to_data(num_sites) for log in logs)
+    responds = site_responses(logs, num_sites)
+    datas = tuple(log.to_data(num_sites, responds) for log in logs)
     args = (datas, tuple(jnp.asarray(log.onset_start) for log in logs), tuple(jnp.asarray(float(lag)) for _ in logs))
     x0 = jnp.asarray(_initial_x(layout, logs, lag))
     solution = _solve_press(layout, solver, max_steps, x0, args)
@@ -226,17 +231,19 @@ def _fit_press_logs(logs, sources, *, terms, indentation, position_columns, drif
         layout, args, solution = _fit_terms(count, prepared, len(sites), estimate_lag, lag, solver, max_steps)
         outputs = _press_outputs(layout, solution.value, args)
         chi_square = float(sum(jnp.sum(r**2) for r in outputs[0][0]))
+        solver_chi_square = float(jnp.sum(press_residual_fn(layout)(solution.value, args) ** 2))
         bic = chi_square + (layout.size + num_linear) * math.log(num_used)
         if best is None or bic < best[0]:
-            best = (bic, count, layout, args, solution, chi_square, outputs)
-    _, count, layout, args, solution, chi_square, outputs = best
-    return _summarise(layout, args, solution, chi_square, outputs, prepared, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, report, position_columns, indentation)
+            best = (bic, count, layout, args, solution, (chi_square, solver_chi_square), outputs)
+    _, count, layout, args, solution, chi_squares, outputs = best
+    return _summarise(layout, args, solution, chi_squares, outputs, prepared, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, report, position_columns, indentation)
 
 
 def _summarise(
-    layout, args, solution, chi_square, outputs, logs, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, report, position_columns, indentation,
+    layout, args, solution, chi_squares, outputs, logs, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, report, position_columns, indentation,
 ) -> PressFit:
     x = solution.value
+    chi_square, solver_chi_square = chi_squares
     (residuals, baselines, amplitudes), jacobian = outputs
     jacobian = np.asarray(jacobian)
     dof = max(num_used - layout.size - num_linear, 1)
@@ -303,7 +310,8 @@ def _summarise(
     return PressFit(
         ratios=ratios, taus=taus, amplitudes=np.asarray(amplitudes), sites=sites,
         site_onsets=site_onsets, onsets=onset_values, onset_stds=onset_stds, lags=lag_params, baselines=[np.asarray(b) for b in baselines],
-        channels=channels, skipped=skipped, logs=logs, residuals=[np.asarray(r) for r in residuals], chi_square=chi_square, dof=dof,
+        channels=channels, skipped=skipped, logs=logs, residuals=[np.asarray(r) for r in residuals], chi_square=chi_square,
+        solver_chi_square=solver_chi_square, dof=dof,
         converged=converged, num_steps=int(solution.num_steps), solver=solver_name(solver), drift=drift, warnings=messages, num_terms=k,
         position_columns=tuple(position_columns), indentation=indentation, estimate_lag=estimate_lag,
     )

@@ -89,6 +89,7 @@ def make_press_report(fit: PressFit) -> dict:
         "converged": fit.converged,
         "num_steps": fit.num_steps,
         "chi_square": fit.chi_square,
+        "solver_chi_square": fit.solver_chi_square,
         "dof": fit.dof,
         "reduced_chi_square": fit.reduced_chi_square,
         "modulus_scale": "relative",

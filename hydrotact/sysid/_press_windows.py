@@ -29,7 +29,9 @@ class PressData(eqx.Module):
     press's window, the samples its input is not 0 between (its own and one either
     side), concatenated: `window` (W,) their sample indices, `window_press` (W,) and
     `window_restart` (W,) whose window and where one starts; per press
-    `window_last` (P,) where its window ends in the concatenation.
+    `window_last` (P,) where its window ends in the concatenation. `responds` (C, S)
+    where a channel's law is fitted (elsewhere it is 0; the same for all the logs of
+    a fit).
     """
 
     times: Float[Array, " num_samples"]
@@ -43,12 +45,13 @@ class PressData(eqx.Module):
     window_press: Int[Array, " num_window"]
     window_restart: Bool[Array, " num_window"]
     window_last: Int[Array, " num_presses"]
+    responds: Bool[Array, "num_channels num_sites"]
     num_sites: int = eqx.field(static=True)
 
 
-def make_press_data(times, travel, press, press_site, observed, weights, baseline, num_sites: int) -> PressData:
-    """A :class:`PressData` from host arrays (as its fields), its press windows
-    found here: press p's input is 0 outside (first − 1, last + 1) of its samples
+def make_press_data(times, travel, press, press_site, observed, weights, baseline, num_sites: int, responds=None) -> PressData:
+    """A :class:`PressData` from host arrays (as its fields; `responds` all True
+    unless given), its press windows found here: press p's input is 0 outside (first − 1, last + 1) of its samples
     (linear between samples), so its hereditary integral is its window's, then a
     free decay. A press without samples gets a one-sample window of 0 input."""
     press = np.asarray(press)
@@ -66,7 +69,8 @@ def make_press_data(times, travel, press, press_site, observed, weights, baselin
     return PressData(
         jnp.asarray(times), jnp.asarray(travel), jnp.asarray(press), jnp.asarray(press_site), jnp.asarray(observed), jnp.asarray(weights),
         jnp.asarray(baseline), jnp.asarray(window), jnp.asarray(np.repeat(np.arange(num_presses), length)), jnp.asarray(restart),
-        jnp.asarray(np.cumsum(length) - 1), num_sites,
+        jnp.asarray(np.cumsum(length) - 1),
+        jnp.asarray(np.ones((np.shape(observed)[1], num_sites), bool) if responds is None else np.asarray(responds, bool)), num_sites,
     )
 
 
