@@ -15,8 +15,8 @@ Both codes fit the same thing: the log prepared once by hydrotact
 baseline basis), the same parameters (log E_i/E_inf, log tau_i, the onsets' and the
 lag's tanh coordinates), the same start x0, the same model (the site-split
 hereditary integrals of the four powers of the depth, the active set found in two
-frozen passes, the amplitudes and baselines projected out per channel by the
-Jacobi-scaled normal equations). scipy's is written in NumPy as a user without JAX
+frozen passes, the amplitudes — where a channel responds — and baselines projected
+out per channel by the Jacobi-scaled normal equations). scipy's is written in NumPy as a user without JAX
 would: the hereditary integral as its exact recursion over the jittered steps (a
 loop over the samples, vectorised over terms, sites and powers), the Jacobian by
 finite differences (jac='2-point'), methods 'trf' and 'lm'. hydrotact: the jitted
@@ -35,7 +35,7 @@ import scipy.optimize
 from hydrotact.data import read_log, write_log
 from hydrotact.sim import FINGERTIP_SENSOR, StageSession, simulate_stage_log
 from hydrotact.sysid._lumped import ACTIVE_PASSES, LAG_BOUND, ONSET_HALF_RANGE, RIDGE, PressLayout, press_residual_fn
-from hydrotact.sysid._press_data import prepare_press_logs
+from hydrotact.sysid._press_data import prepare_press_logs, site_responses
 from hydrotact.sysid._press_fit import _initial_x, fit_press_logs
 from hydrotact.sysid._press_windows import DEPTH_SCALE, POWERS
 from hydrotact.visco import Prony
@@ -81,7 +81,8 @@ class NumpyPressModel:
 
     def __init__(self, log, num_terms, num_sites):
         self.log, self.k, self.num_sites = log, num_terms, num_sites
-        data = log.to_data(num_sites)
+        self.responds = site_responses([log], num_sites)  # (C, S): a channel's law is fitted only where it responds
+        data = log.to_data(num_sites, self.responds)
         self.times = np.asarray(data.times)
         self.travel = np.asarray(data.travel)
         self.press = np.asarray(data.press)
@@ -119,7 +120,8 @@ class NumpyPressModel:
         amplitudes = np.empty((self.observed.shape[1], bases.shape[1]))
         for c in range(self.observed.shape[1]):
             w = self.w[:, c]
-            columns = np.hstack([self.baseline * w[:, None], bases * (w * active[:, c])[:, None]])
+            law = np.repeat(self.responds[c], len(POWERS)).astype(float)  # (S J)
+            columns = np.hstack([self.baseline * w[:, None], bases * (w * active[:, c])[:, None] * law[None, :]])
             target = self.observed[:, c] * w
             normal = columns.T @ columns
             diagonal = np.diagonal(normal)
@@ -155,7 +157,8 @@ def bench_press_fit(args, rows):
     layout = PressLayout(num_terms, (len(prepared[0].onset_start),), True)
     x0 = np.asarray(_initial_x(layout, prepared))
     model = NumpyPressModel(prepared[0], num_terms, len(sites))
-    check = np.asarray(press_residual_fn(layout)(jnp.asarray(x0), ((prepared[0].to_data(len(sites)),), (jnp.asarray(prepared[0].onset_start),), (jnp.asarray(0.0),))))
+    data = prepared[0].to_data(len(sites), site_responses(prepared, len(sites)))
+    check = np.asarray(press_residual_fn(layout)(jnp.asarray(x0), ((data,), (jnp.asarray(prepared[0].onset_start),), (jnp.asarray(0.0),))))
     agreement = float(np.abs(model.residuals(x0) - check).max())
     print(f"NumPy model vs hydrotact's at x0: largest residual difference {agreement:.2e} (noise units)", flush=True)
     # The same cost for both: the projected model's (the solver's objective) at hydrotact's solution.

@@ -513,14 +513,11 @@ display(Image(press_report["files"]["traces_png"], width=760))
 # Read the warnings before the numbers. This material relaxes strongly (by 40 % over a
 # hold, with a third of it in 0.3 s), and on such logs the lumped press fit does not
 # yet reach the noise: its reduced χ² is far above 1 and the slow term's ratio comes
-# out low. Two things go wrong, both open (hydrotact issue 13). The lumped model itself
-# misses this log: at the true relaxation, each site's law solved, its reduced χ² is
-# ~30, and the fit started there ends no better. And the fit finds where each contact
-# pushes in two least-squares passes; on the samples it finds cut off, a site's law is
-# left free and can take any shape (hundreds of Pa at a few µm), which the model's own
-# residuals, the ones reported, then count: the reduced χ² printed above can be
-# several times the one the solver minimised (printed beside it; ~25 in the smoke
-# run, with a reported ~210). On the test
+# out low. It is the lumped model, not the solver: at the true relaxation, each site's
+# law solved, the model misses this log by a reduced χ² of ~30, and the fit started
+# there ends no better. Why a strongly relaxing skin defeats the lumped model is open
+# (hydrotact issue 13). The reduced χ² printed is the model's own, as `compare`
+# predicts; the solver's, printed beside it, is the projection it minimised. On the test
 # suite's stand-in, which relaxes ~20 %, the same fit recovers Eᵢ/E∞ and τᵢ within
 # their standard errors. A reduced χ² well above 1 is always reported as a warning,
 # on the console and in `report.json`.

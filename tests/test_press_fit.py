@@ -122,8 +122,10 @@ def test_calibrate_on_three_and_compare_three(stand_in, tmp_path):
     fit = fit_press_logs([log for _, log, _ in calibration], [str(path) for path, _, _ in calibration], terms=2, estimate_lag=True)
     assert fit.converged and fit.reduced_chi_square < 1.3
     # The model's own χ² (compare's) against the projection's the solver minimised:
-    # they differ only where the push starts or ends at the final amplitudes (2 % here).
-    assert abs(fit.chi_square / fit.solver_chi_square - 1.0) < 0.1
+    # they differ only where the push starts or ends (0.2 % here; 2 % before the
+    # amplitudes were polished by more passes, 70 % on the benchmark's log before a
+    # channel's law was fixed at 0 where it does not respond).
+    assert abs(fit.chi_square / fit.solver_chi_square - 1.0) < 0.05
     report = write_press_fit_outputs(fit, tmp_path / "fit", paths=[str(path) for path, _, _ in calibration])
     material = json.loads((tmp_path / "fit" / "material.json").read_text())
     assert material["modulus_scale"] == "relative" and material["channel_law"]["channels"] == ["f0", "f1", "f2"]
@@ -136,7 +138,7 @@ def test_calibrate_on_three_and_compare_three(stand_in, tmp_path):
         for name, channel in entry["channels"].items():
             # The relaxation's shape over each hold within 1.5 x the readings' noise,
             # the whole log within 2.5 x: at depths and speeds the fit never saw, each
-            # log's baseline from its own unloaded samples, 1.0-1.5 x on f0 and f1,
+            # log's baseline from its own unloaded samples, 1.0-1.1 x on f0 and f1,
             # 1.8-2.1 x on f2, whose law at 0.35 mm is too weak at one site.
             assert channel["hold_shape_rms_Pa"] < 1.5 * channel["noise_Pa"], (entry["source"], name, channel)
             assert channel["rms_Pa"] < 2.5 * channel["noise_Pa"], (entry["source"], name, channel)

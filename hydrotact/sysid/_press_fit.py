@@ -40,6 +40,7 @@ from ._lumped import (
     calc_press_jacobian,
     press_residual_fn,
     solve_baselines,
+    solve_linear,
 )
 from ._press_data import DRIFT_KNOT_S, PressLog, prepare_press_logs, site_responses
 from ._press_windows import POWERS
@@ -153,21 +154,47 @@ def _solve_press(layout, solver, max_steps, x0, args):
     return solve_least_squares(press_residual_fn(layout), x0, args, solver, max_steps=max_steps, throw=False)
 
 
-@eqx.filter_jit
-def _press_outputs(layout, x, args):
-    """At x: (the weighted residuals per log, baselines, amplitudes) and the
-    Jacobian. The residuals are the model's own, as `compare` predicts a log: the
-    baseline + max(0, Σ A B) in contact with the final amplitudes, each log's
-    baseline solved given them (the solver's projection found where the elastic part
-    pushes from the amplitudes of a pass before; at its solution the two differ only
-    at a few samples where the push starts or ends)."""
-    _, jacobian, amplitudes, bases, contact = calc_press_jacobian(layout, x, args, linear=True)
+POLISH_PASSES = 6  # more active-set passes at the solution, for the model's own χ²
+
+
+def _own_residuals(datas, bases, contact, amplitudes):
+    """The model's own weighted residuals per log (T, C) for the given amplitudes
+    (the baseline + max(0, Σ A B) in contact, each log's baseline solved given them)
+    and the baselines per log (C, D)."""
     residuals, baselines = [], []
-    for data, basis, touching in zip(args[0], bases, contact):
+    for data, basis, touching in zip(datas, bases, contact):
         elastic = jnp.where(touching[:, None], jnp.maximum(jnp.einsum("tsj,csj->tc", basis, amplitudes), 0.0), 0.0)
         coefficients = solve_baselines(data.baseline, data.observed - elastic, data.weights > 0.0)
         residuals.append((data.observed - elastic - data.baseline @ coefficients.T) * data.weights)
         baselines.append(coefficients)
+    return residuals, baselines
+
+
+@eqx.filter_jit
+def _press_outputs(layout, x, args):
+    """At x: (the weighted residuals per log, baselines, amplitudes) and the
+    Jacobian. The residuals are the model's own, as `compare` predicts a log: the
+    baseline + max(0, Σ A B) in contact, each log's baseline solved given the
+    amplitudes. The solver's projection found where the elastic part pushes from the
+    amplitudes of a pass before, and where that cut a push off, the law was left
+    free; so the amplitudes are those of the projection or of up to POLISH_PASSES
+    further passes (each solved where the one before pushes), whichever gives each
+    channel the lowest own χ²."""
+    _, jacobian, amplitudes, bases, contact = calc_press_jacobian(layout, x, args, linear=True)
+    datas = args[0]
+    best = (amplitudes, *_own_residuals(datas, bases, contact, amplitudes))
+    touching = [jnp.broadcast_to(c[:, None], data.observed.shape) for c, data in zip(contact, datas)]
+    for _ in range(POLISH_PASSES):
+        actives = [t & (jnp.einsum("tsj,csj->tc", basis, amplitudes) > 0.0) for t, basis in zip(touching, bases)]
+        amplitudes = solve_linear(bases, datas, actives)[1]
+        residuals, baselines = _own_residuals(datas, bases, contact, amplitudes)
+        better = sum(jnp.sum(r**2, axis=0) for r in residuals) < sum(jnp.sum(r**2, axis=0) for r in best[1])  # (C,)
+        best = (
+            jnp.where(better[:, None, None], amplitudes, best[0]),
+            [jnp.where(better[None, :], r, old) for r, old in zip(residuals, best[1])],
+            [jnp.where(better[:, None], b, old) for b, old in zip(baselines, best[2])],
+        )
+    amplitudes, residuals, baselines = best
     return (residuals, baselines, amplitudes), jacobian
 
 
