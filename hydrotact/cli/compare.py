@@ -13,7 +13,10 @@ def add_parser(subparsers):
     parser.add_argument("--mapping", type=Path, metavar="MAP.json", help="column mapping for logs of your own layout")
     parser.add_argument(
         "--tare", default="no-load", metavar="no-load|first:S|all",
-        help="each log's baseline: fitted to its samples between presses (default), the mean of its first S seconds, or fitted to all samples (the fit's own)",
+        help=(
+            "each log's baseline: fitted to its samples the model says are unloaded (default: between presses, and in presses where "
+            "a channel's push is 0), the mean of its first S seconds, or fitted to all samples (the fit's own)"
+        ),
     )
     parser.add_argument("-o", "--output", required=True, type=Path, metavar="DIR", help="folder for compare.json, the predicted logs and plots")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")

@@ -5,8 +5,9 @@
 indentation column, the site in position columns) and fits, jointly over the logs:
 
 - shared: the relaxation shape (Eᵢ/E∞, τᵢ) and each channel's elastic law at each
-  site (amplitudes of powers of the depth, see :mod:`hydrotact.sysid._lumped`) —
-  sites are stage positions, matched across logs;
+  site (amplitudes of powers of the depth, see :mod:`hydrotact.sysid._lumped`; fixed
+  at 0 where the channel moves less than SITE_RESPONSE_SNR noise stds in every press
+  at the site) — sites are stage positions, matched across logs;
 - per log: each press's contact onset (within ±0.5 mm of its first estimate), the
   lag of the pressures behind the stage (given, or estimated with `estimate_lag`),
   and each channel's baseline (a constant, a line, or cubic B-splines with knots
