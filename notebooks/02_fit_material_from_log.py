@@ -518,8 +518,8 @@ display(Image(press_report["files"]["traces_png"], width=760))
 # gap, its loading unseen, and the fit drops such presses, and with them their memory.
 # On this skin that memory, recovering, lifts the next press's reading by ~70 Pa over
 # its hold, which nothing left in the model can explain. At the true relaxation the
-# model misses the log after the gap by a reduced χ² of ~55, and fits the part before
-# the gap to the noise (1.05). Keeping such presses in the model is the next step
+# model misses the log after the gap by a reduced χ² of ~58, and fits the part before
+# the gap to the noise (1.08). Keeping such presses in the model is the next step
 # (hydrotact issue 13). The reduced χ² printed is the model's own, as `compare`
 # predicts; the solver's, printed beside it, is the projection it minimised. On the test
 # suite's stand-in, which relaxes ~20 %, the same fit recovers Eᵢ/E∞ and τᵢ within
