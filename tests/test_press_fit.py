@@ -92,9 +92,9 @@ def test_one_log_recovers_the_shape_onsets_and_lag(one_log_fit):
 
 def test_a_law_is_fitted_only_where_the_channel_responds():
     """Per (channel, site): fitted when the channel moves more than SITE_RESPONSE_SNR
-    noise stds in some press there, in some log; a hold the channel was clipped
-    through (NaN: unknown) counts as a response."""
-    first = SimpleNamespace(noise=np.ones(3), press_site=np.array([0, 1, 0]), responses=np.array([[50.0, 0.5, 2.9], [1.0, np.nan, 0.2], [0.3, 0.1, 0.0]]))
+    noise stds in some press there, in some log; where no press measured it (NaN:
+    clipped through the hold, or a press begun in a gap), it is fitted."""
+    first = SimpleNamespace(noise=np.ones(3), press_site=np.array([0, 1, 0, 2]), responses=np.array([[50.0, 0.5, 2.9], [1.0, np.nan, 0.2], [0.3, 0.1, 0.0], [np.nan] * 3]))
     second = SimpleNamespace(noise=np.ones(3), press_site=np.array([2]), responses=np.array([[0.0, 0.0, SITE_RESPONSE_SNR + 0.1]]))
     expected = np.array([[True, False, False], [False, True, False], [False, False, True]])  # (C, S)
     np.testing.assert_array_equal(site_responses([first, second], 3), expected)

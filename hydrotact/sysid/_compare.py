@@ -160,11 +160,13 @@ def compare_log(document, report, log, source, *, tare="no-load", drift=None, sa
     presses = find_log_presses(log, law["indentation"], law["position_columns"], source=source)
     own = _own_log(report, _file_digest(source))
     sites = law["sites"]
-    if own is not None and len(own["presses"]) == int((~presses.unseen).sum()):
+    # Presses that began in a gap are in the model (their memory lifts the next
+    # presses' readings) but not compared (their loading is unseen).
+    if own is not None and len(own["presses"]) == presses.num_presses:
         site_ids = np.array([p["site"] for p in own["presses"]])
         onsets = np.array([p["onset_m"] for p in own["presses"]])
         lag = float(own["lag_s"]["value"])
-        keep = ~presses.unseen
+        keep = np.ones(presses.num_presses, dtype=bool)
     else:
         site_ids = np.array([_site_of(presses.positions[s], sites) for s in presses.sites])
         unknown = (site_ids < 0) & ~presses.unseen
@@ -172,7 +174,7 @@ def compare_log(document, report, log, source, *, tare="no-load", drift=None, sa
             raise HydrotactError(f"{source}: none of its presses is at a site of the fit (positions from {', '.join(law['position_columns']) or 'no columns'})")
         if unknown.any():
             say(f"{source}: {int(unknown.sum())} press(es) at sites the fit has not seen: not compared")
-        keep = (site_ids >= 0) & ~presses.unseen
+        keep = site_ids >= 0
         onsets = np.array([sites[s]["onset_m"] for s in site_ids[keep]])
         lag = float(law["lag_s"])
         site_ids = site_ids[keep]
@@ -180,7 +182,7 @@ def compare_log(document, report, log, source, *, tare="no-load", drift=None, sa
     times = np.asarray(log.times, dtype=np.float64)
     travel = np.asarray(log.columns[law["indentation"]], dtype=np.float64)
     mask = ~find_clipped(observed, upper_limit(log, source, saturation_pa)) & ~find_kinks(times, travel)[:, None]
-    for start, end in zip(presses.starts[~keep], presses.ends[~keep]):
+    for start, end in zip(presses.starts[~keep | presses.unseen], presses.ends[~keep | presses.unseen]):
         mask[start:end] = False
     kept = dataclasses.replace(presses, starts=presses.starts[keep], ends=presses.ends[keep], sites=presses.sites[keep], unseen=presses.unseen[keep])
     press = kept.press_of_samples(log.num_samples)

@@ -317,7 +317,7 @@ def _summarise(
         values = [float(onset[p]) for log, onset in zip(logs, onset_values) for p in np.flatnonzero(log.press_site == s)]
         if values:
             site_onsets[s] = float(np.mean(values))
-    # Sites seen only in presses that began in gaps have no onset: left out of the result.
+    # Sites no press of a fitted log reached (only a skipped log's) have no onset: left out of the result.
     seen = np.isfinite(site_onsets)
     renumber = np.cumsum(seen) - 1
     logs = [dataclasses.replace(log, press_site=renumber[log.press_site]) for log in logs]
