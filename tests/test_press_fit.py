@@ -121,6 +121,13 @@ def test_calibrate_on_three_and_compare_three(stand_in, tmp_path):
     calibration = stand_in["calibration"]
     fit = fit_press_logs([log for _, log, _ in calibration], [str(path) for path, _, _ in calibration], terms=2, estimate_lag=True)
     assert fit.converged and fit.reduced_chi_square < 1.3
+    # Jointly, the three logs (calibration2 has a press that began in its gap: kept
+    # for its memory) give the Prony terms within their standard errors (0.3-1.1
+    # sigma here; before that press was kept, tau2 was 2.7 sigma off).
+    ratios = np.asarray(MATERIAL.moduli) / float(MATERIAL.long_term_modulus)
+    for k in range(2):
+        assert abs(fit.taus[k].value - float(MATERIAL.taus[k])) < 3 * fit.taus[k].std
+        assert abs(fit.ratios[k].value - ratios[k]) < 3 * fit.ratios[k].std
     # The model's own χ² (compare's) against the projection's the solver minimised:
     # they differ only where the push starts or ends (0.2 % here; 2 % before the
     # amplitudes were polished by more passes, 70 % on the benchmark's log before a
@@ -137,11 +144,10 @@ def test_calibrate_on_three_and_compare_three(stand_in, tmp_path):
     for entry in result["logs"]:
         for name, channel in entry["channels"].items():
             # The relaxation's shape over each hold within 1.5 x the readings' noise,
-            # the whole log within 2.5 x: at depths and speeds the fit never saw, each
-            # log's baseline from its own unloaded samples, 1.0-1.1 x on f0 and f1,
-            # 1.8-2.1 x on f2, whose law at 0.35 mm is too weak at one site.
+            # the whole log within 2 x: at depths and speeds the fit never saw, each
+            # log's baseline from its own unloaded samples, 1.0-1.5 x.
             assert channel["hold_shape_rms_Pa"] < 1.5 * channel["noise_Pa"], (entry["source"], name, channel)
-            assert channel["rms_Pa"] < 2.5 * channel["noise_Pa"], (entry["source"], name, channel)
+            assert channel["rms_Pa"] < 2.0 * channel["noise_Pa"], (entry["source"], name, channel)
             assert channel["r2"] > 0.99  # a channel that barely moves has an R² near its noise
     # On the fit's own logs, with the baseline solved over all their samples (the
     # fit's own baseline, given its laws): the fit's residuals, sample by sample.

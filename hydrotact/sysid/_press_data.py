@@ -267,6 +267,12 @@ def prepare_press_logs(
                 if not match:
                     centres.append(np.asarray(position, dtype=np.float64))
             site_ids = site_ids[presses.sites]
+        # A press begun in a gap gets a site of its own (no position: never matched),
+        # so that its memory, fitted from the samples after it, does not bend the law
+        # of the site it was at (its onset is hardly identified).
+        for p in np.flatnonzero(presses.unseen):
+            site_ids[p] = len(centres)
+            centres.append(np.full(len(position_columns), np.nan))
         prepared.append((log, source, presses, site_ids))
     # Channels: masked where clipped; fitted when they respond to some press.
     staged = []
