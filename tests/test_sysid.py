@@ -20,7 +20,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 import pytest
-from sysid_synthetic import FullLogMaker, make_lumped_log
+from sysid_synthetic import FullLogMaker
 
 from hydrotact import HydrotactError
 from hydrotact.data import BarometerLog, read_material
@@ -103,18 +103,6 @@ def maker_2():
 @pytest.fixture(scope="module")
 def problem_2(maker_2):
     return make_fit_problem([maker_2.make(0)], unit_responses=maker_2.unit_responses)
-
-
-LUMPED_AMPLITUDES = np.array([800.0, 1500.0, 400.0])  # Pa at the deepest indentation
-LUMPED_EXPONENTS = np.array([1.5, 1.3, 1.7])
-
-
-@pytest.fixture(scope="module")
-def lumped_result():
-    relative = make_prony(1.0, np.asarray(TRUTH_3["moduli"]) / TRUTH_3["long_term_modulus"], TRUTH_3["taus"])
-    # A fourth channel the probe never reaches (amplitude 0): left out of the fit.
-    log = make_lumped_log(relative, np.append(LUMPED_AMPLITUDES, 0.0), np.append(LUMPED_EXPONENTS, 1.0), duration=180.0, rate_hz=50.0, seed=5, holds=(2.0, 40.0))
-    return fit_problem(make_fit_problem([log], mode="lumped"), 3, make_solver("lm"))
 
 
 # --- 1. known-truth recovery ------------------------------------------------------------
@@ -314,27 +302,7 @@ def test_fit_auto_picks_true_number_of_terms(case, request):
     assert result.bic == result.criteria[true_terms]
 
 
-# --- 5. lumped mode ----------------------------------------------------------------------------
-
-
-def test_lumped_recovers_power_law_and_kernel_shape(lumped_result):
-    """Per-channel amplitude and exponent (1.5, 1.3, 1.7) and Eᵢ/E∞, τᵢ within 5 %;
-    the silent fourth channel is left out."""
-    result = lumped_result
-    assert result.converged
-    assert result.problem.infos[0].channels == ("b0", "b1", "b2") and result.problem.infos[0].excluded == ("b3",)
-    assert result.long_term_modulus.value == 1.0 and not result.layout.has_long_term
-    ratios = np.asarray(TRUTH_3["moduli"]) / TRUTH_3["long_term_modulus"]
-    for (modulus, tau), ratio, true_tau in zip(result.terms, ratios, TRUTH_3["taus"]):
-        assert abs(modulus.value / ratio - 1.0) < 0.05, (modulus, ratio)
-        assert abs(tau.value / true_tau - 1.0) < 0.05, (tau, true_tau)
-    amplitudes = np.exp([result.x[result.names.index(f"log_amplitude[1/b{c}]")] for c in range(3)])
-    exponents = np.exp([result.x[result.names.index(f"log_exponent[1/b{c}]")] for c in range(3)])
-    np.testing.assert_allclose(amplitudes, LUMPED_AMPLITUDES, rtol=0.05)
-    np.testing.assert_allclose(exponents, LUMPED_EXPONENTS, rtol=0.05)
-
-
-# --- 6. implicit gradient through the solve ------------------------------------------------------
+# --- 5. implicit gradient through the solve ------------------------------------------------------
 
 
 def test_fit_parameters_gradient_matches_refits():
@@ -372,7 +340,7 @@ def test_fit_parameters_gradient_matches_refits():
         np.testing.assert_allclose(gradient[sample, column], difference, rtol=1e-4, err_msg=f"sample {sample} column {column}")
 
 
-# --- 7. relaxation curves and pyvisco ----------------------------------------------------------------
+# --- 6. relaxation curves and pyvisco ----------------------------------------------------------------
 
 RELAXATION_INF = 1e6
 RELAXATION_TERMS = np.array([[3e5, 0.05], [2e5, 1.0], [1e5, 20.0]])  # (Eᵢ Pa, τᵢ s)
@@ -419,7 +387,7 @@ def test_relaxation_curve_no_worse_than_pyvisco():
     assert np.all(np.abs(ours - truth) < 5.0 * stds), ((ours - truth) / stds)
 
 
-# --- 8. bad input ----------------------------------------------------------------------------------------
+# --- 7. bad input ----------------------------------------------------------------------------------------
 
 
 @pytest.fixture(scope="module")
@@ -434,36 +402,11 @@ def _assert_one_line(error, *fragments):
         assert fragment in message, (fragment, message)
 
 
-def test_unknown_mode(tiny_maker):
-    with pytest.raises(HydrotactError) as error:
-        make_fit_problem([tiny_maker.make(0)], mode="elastic", unit_responses=tiny_maker.unit_responses)
-    _assert_one_line(error, "unknown fit mode 'elastic'", "full", "lumped")
-
-
-def test_lumped_without_indentation_column(tiny_maker):
-    log = tiny_maker.make(0)
-    columns = {k: v for k, v in log.columns.items() if k != "indentation"}
-    with pytest.raises(HydrotactError) as error:
-        make_fit_problem([BarometerLog(log.metadata, columns)], mode="lumped", sources=["press.parquet"])
-    _assert_one_line(error, "press.parquet", "no indentation column 'indentation'")
-    with pytest.raises(HydrotactError) as error:
-        make_fit_problem([log], mode="lumped", indentation="depth")
-    _assert_one_line(error, "'depth'", "indentation")
-
-
-def test_indentation_never_positive(tiny_maker):
-    log = tiny_maker.make(0)
-    columns = dict(log.columns, indentation=-np.abs(log.columns["indentation"]))
-    with pytest.raises(HydrotactError) as error:
-        make_fit_problem([BarometerLog(log.metadata, columns)], mode="lumped")
-    _assert_one_line(error, "'indentation'", "never positive")
-
-
 def test_too_few_samples(tiny_maker):
     log = tiny_maker.make(0)
     columns = {k: v[:5] for k, v in log.columns.items()}
     with pytest.raises(HydrotactError) as error:
-        make_fit_problem([BarometerLog(log.metadata, columns)], mode="lumped")
+        make_fit_problem([BarometerLog(log.metadata, columns)], unit_responses=[tuple(a[:5] for a in tiny_maker.unit_responses[0])])
     _assert_one_line(error, "5 samples", "at least 8")
 
 
@@ -478,7 +421,7 @@ def test_unit_responses_of_wrong_shape(tiny_maker):
 
 def test_no_logs():
     with pytest.raises(HydrotactError) as error:
-        make_fit_problem([], mode="lumped")
+        make_fit_problem([])
     _assert_one_line(error, "no logs")
 
 
@@ -511,7 +454,7 @@ def test_relaxation_curve_bad_input(times, modulus, fragment):
     _assert_one_line(error, fragment)
 
 
-# --- 9. outputs ---------------------------------------------------------------------------------------------
+# --- 8. outputs ---------------------------------------------------------------------------------------------
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -548,11 +491,3 @@ def test_write_fit_outputs_full(result_3, tmp_path):
     assert report["mode"] == "full" and report["converged"]
     assert report["solver"] == material["provenance"]["solver"] == "lm"  # the name, as before solvers were objects
 
-
-def test_write_fit_outputs_lumped(lumped_result, tmp_path):
-    material, report = _check_outputs(lumped_result, tmp_path)
-    assert material["modulus_scale"] == "relative"
-    assert material["long_term_modulus_Pa"]["value"] == 1.0
-    assert report["modulus_scale"] == "relative"
-    exponents = [report["elastic_response"][f"1/b{c}"]["exponent"]["value"] for c in range(3)]
-    np.testing.assert_allclose(exponents, LUMPED_EXPONENTS, rtol=0.05)

@@ -44,6 +44,10 @@ def add_parser(subparsers):
         "--press-threshold", type=number, default=0.05, metavar="F",
         help="--lumped: a press is where the travel is above its rest level by this fraction of its range (default 0.05)",
     )
+    parser.add_argument(
+        "--starts", type=int, default=3, metavar="N",
+        help="--lumped: relaxation shapes to start from, at most (1-3, default 3): the next is tried while the fit ends above a reduced chi2 of 1.5, the lowest kept",
+    )
     parser.add_argument("--max-steps", type=int, metavar="N", help="solver steps before it stops (default 400; the minimisers 4000)")
     parser.add_argument("--mapping", type=Path, metavar="MAP.json", help="column mapping for logs of your own layout")
     parser.add_argument("--terms", default="auto", metavar="N|auto", help="Prony terms, or auto (lowest BIC over 0-4; default)")
@@ -65,6 +69,7 @@ def run(args) -> None:
         press_options = {
             "position_columns": tuple(name for name in args.position_columns.split(",") if name), "drift": parse_drift(args.drift), "lag": args.lag,
             "estimate_lag": args.estimate_lag, "saturation_pa": args.saturation, "threshold": args.press_threshold,
+            "starts": args.starts,
         }
     report = fit_logs(
         args.logs, args.output, sensor=args.sensor, lumped=args.lumped, indentation=args.indentation, mapping=args.mapping,
@@ -143,6 +148,8 @@ def print_press_table(report: dict) -> None:
         if log["lag_s"].get("note") != "given":
             row(f"lag {log['source']}", log["lag_s"], " s")
     Console().print(table)
+    if report.get("num_starts", 1) > 1:
+        print(f"  fitted from {report['num_starts']} relaxation shapes (a fit ended above a reduced χ² of 1.5); the lowest χ² is kept")
     for entry in report["residuals"]:
         cells = ", ".join(f"{name} {c['rms_Pa']:.3g} Pa (R² {c['r2']:.5f})" for name, c in entry["channels"].items() if c["rms_Pa"] is not None)
         print(f"  {entry['source']}: RMS residual {cells}")

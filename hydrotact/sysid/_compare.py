@@ -34,7 +34,7 @@ import numpy as np
 from .._errors import HydrotactError
 from ..data import estimate_noise, read_material
 from ..visco import Prony
-from ._lumped import solve_baselines
+from ._lumped import calc_elastic, solve_baselines
 from ._press_data import DRIFT_KNOT_S, drift_basis, find_clipped, find_kinks, upper_limit
 from ._press_windows import POWERS, calc_bases, calc_depths, make_press_data
 from ._presses import SITE_TOLERANCE, find_log_presses
@@ -190,7 +190,7 @@ def compare_log(document, report, log, source, *, tare="no-load", drift=None, sa
     depths = calc_depths(data, jnp.asarray(onsets), lag)
     bases = np.asarray(calc_bases(_law_prony(document), depths, data))  # (T, S, J)
     amplitudes = np.array([[site["amplitudes_Pa"][name] for site in sites] for name in channels], dtype=np.float64)  # (C, S, J)
-    elastic = np.where(np.asarray(depths > 0.0)[:, None], np.maximum(np.einsum("tsj,csj->tc", bases, amplitudes), 0.0), 0.0)
+    elastic = np.asarray(calc_elastic(bases, depths > 0.0, amplitudes))
     if isinstance(tare, tuple):
         first = times - times[0] <= tare[1]
         baseline = np.broadcast_to(np.mean(np.where(mask & first[:, None], observed, np.nan), axis=0)[None, :], observed.shape)

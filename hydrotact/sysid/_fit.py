@@ -107,8 +107,6 @@ class FitResult:
 
     @property
     def long_term_modulus(self) -> Estimate:
-        if not self.layout.has_long_term:
-            return Estimate(1.0, 0.0)
         return self._estimate("log_long_term_modulus")
 
     @property
@@ -122,7 +120,7 @@ class FitResult:
         """E(0) = E∞ + Σ Eᵢ, its error from the covariance (gradient of a sum of exps)."""
         k = [i for i, name in enumerate(self.names) if name == "log_long_term_modulus" or name.startswith("log_modulus_")]
         values = np.exp(self.x[k])
-        value = float(values.sum() + (0.0 if self.layout.has_long_term else 1.0))
+        value = float(values.sum())
         return Estimate(value, float(np.sqrt(max(values @ self.covariance[np.ix_(k, k)] @ values, 0.0))))
 
     @property
@@ -207,30 +205,13 @@ def make_initial_guess(problem: FitProblem, num_terms: int) -> tuple[ParameterLa
     layout = make_layout(problem, num_terms)
     times_list = [np.asarray(log.times) for log in problem.logs]
     grid = make_tau_grid(times_list)
-    lumped = problem.mode == "lumped"
-    blocks, scales = [], []
-    for log in problem.logs:
-        observed = np.asarray(log.observed)
-        count = log.num_channels
-        inputs = np.asarray(log.inputs) ** 1.5 if lumped else np.asarray(log.inputs)
-        channel_scales = None
-        if lumped:
-            spread = np.percentile(observed, 99.5, axis=0) - np.percentile(observed, 0.5, axis=0)
-            channel_scales = np.maximum(spread, 1e-12)
-            scales.append(channel_scales)
-        blocks.append(design_block(log.times, inputs, observed, log.weights, count, channel_scales, grid))
+    blocks = [design_block(log.times, log.inputs, log.observed, log.weights, log.num_channels, grid) for log in problem.logs]
     moduli = fit_linear_moduli(blocks)
     total = max(float(moduli.sum()), 1e-300)
     floor = _MODULUS_FLOOR * total
     long_term = max(float(moduli[0]), floor)
     taus, term_moduli = merge_terms(grid, moduli[1:], num_terms, floor)
-    offsets = np.zeros(layout.num_channels)
-    kwargs = {}
-    if lumped:
-        amplitudes = np.concatenate(scales) * long_term
-        kwargs = {"amplitudes": amplitudes, "exponents": np.full(layout.num_channels, 1.5)}
-        term_moduli, long_term = term_moduli / long_term, 1.0
-    x0 = pack(layout, long_term=long_term, moduli=term_moduli, taus=taus, gains=np.ones(layout.num_gains), offsets=offsets, **kwargs)
+    x0 = pack(layout, long_term=long_term, moduli=term_moduli, taus=taus, gains=np.ones(layout.num_gains), offsets=np.zeros(layout.num_channels))
     # Offsets: the mean misfit of each channel at the start, in noise units.
     predictions = _predict(jnp.asarray(x0), problem.without_infos(), layout)
     first = layout.num_material + layout.num_gains
@@ -248,14 +229,10 @@ def _bounds(problem: FitProblem, layout: ParameterLayout, x0: np.ndarray):
     lower, upper = np.full_like(x0, -1e12), np.full_like(x0, 1e12)
     shortest = min(float(np.min(np.diff(np.asarray(log.times)))) for log in problem.logs)
     span = max(float(log.times[-1] - log.times[0]) for log in problem.logs)
-    material = int(layout.has_long_term)
-    k = slice(material + layout.num_terms, material + 2 * layout.num_terms)
+    k = slice(1 + layout.num_terms, 1 + 2 * layout.num_terms)
     lower[k], upper[k] = np.log(shortest / 10.0), np.log(10.0 * span)
-    for sl in (slice(0, material + layout.num_terms), slice(layout.num_material, layout.num_material + layout.num_gains)):
+    for sl in (slice(0, 1 + layout.num_terms), slice(layout.num_material, layout.num_material + layout.num_gains)):
         lower[sl], upper[sl] = x0[sl] - np.log(1e6), x0[sl] + np.log(1e6)
-    if layout.mode == "lumped":
-        start = layout.num_material + layout.num_gains + layout.num_channels
-        lower[start:], upper[start:] = x0[start:] - np.log(1e6), x0[start:] + np.log(1e6)
     return jnp.asarray(lower), jnp.asarray(upper)
 
 

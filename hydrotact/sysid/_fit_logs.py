@@ -68,7 +68,7 @@ def fit_logs(
     `hydrotact.viz.plot_fit`; the stage draws nothing itself). `solver` is a solver
     object (default: Levenberg–Marquardt) or the name of one of SOLVERS. A `lumped`
     fit is the press model of :func:`fit_press_logs` (`press_options` its keyword
-    arguments: position_columns, drift, lag, estimate_lag, saturation_pa, threshold);
+    arguments: position_columns, drift, lag, estimate_lag, saturation_pa, threshold, starts);
     `plot` then draws a PressFit. `max_steps` caps the solver's steps. Returns the report (with `files`)."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -85,8 +85,7 @@ def fit_logs(
     logs = read_logs([Path(p) for p in paths], mapping, sensor, report_warning)
     if tare:
         logs = [tare_log(log, source=str(path))[0] for log, path in zip(logs, paths)]
-    mode = "lumped" if lumped else "full"
-    problem = make_fit_problem(logs, mode=mode, indentation=indentation, field=field, num_rays=num_rays, sources=[str(p) for p in paths], progress=progress)
+    problem = make_fit_problem(logs, field=field, num_rays=num_rays, sources=[str(p) for p in paths], progress=progress)
     counts = list(range(MAX_AUTO_TERMS + 1)) if terms == "auto" else [terms]
     with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} fits"), TimeElapsedColumn(), transient=True, disable=not progress) as bar:
         task = bar.add_task(f"fitting ({name})", total=len(counts))

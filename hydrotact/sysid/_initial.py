@@ -79,19 +79,14 @@ def fit_linear_moduli(blocks) -> np.ndarray:
     return solution / column_scale
 
 
-def design_block(times, inputs, observed, weights, centred_columns: int, channel_scales=None, taus=None):
+def design_block(times, inputs, observed, weights, centred_columns: int, taus):
     """One log's rows for the linear fit: basis responses (rows = samples × columns),
     weighted; the first `centred_columns` columns lose their mean (their offset is
-    free); `channel_scales` divide those columns (lumped mode's unknown amplitudes)."""
+    free)."""
     step = max(1, len(times) // _MAX_ROWS)
     basis = np.array(_basis(jnp.asarray(times), jnp.asarray(inputs), jnp.asarray(taus))[::step])
     observed = np.asarray(observed, dtype=np.float64)[::step].copy()
-    if basis.shape[1] != observed.shape[1]:  # lumped: one input shared by the channels
-        basis = np.broadcast_to(basis, (basis.shape[0], observed.shape[1], basis.shape[2])).copy()
-    weights = np.asarray(weights, dtype=np.float64).copy()
-    if channel_scales is not None:
-        observed[:, :centred_columns] /= channel_scales
-        weights[:centred_columns] = 1.0
+    weights = np.asarray(weights, dtype=np.float64)
     observed[:, :centred_columns] -= observed[:, :centred_columns].mean(axis=0)
     basis[:, :centred_columns] -= basis[:, :centred_columns].mean(axis=0)
     return (basis * weights[None, :, None]).reshape(-1, basis.shape[2]), (observed * weights[None, :]).reshape(-1)

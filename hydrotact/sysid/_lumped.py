@@ -256,12 +256,18 @@ def calc_press_jacobian(layout: "PressLayout", x, args, linear: bool = False):
     return (value, jacobian, amplitudes, bases, [piece[2] for piece in pieces]) if linear else (value, jacobian)
 
 
+def calc_elastic(bases, touching, amplitudes):
+    """(T, C) the elastic part of the readings, for bases (T, S, J) and amplitudes
+    (C, S, J): max(0, Σ A B) where the probe touches (`touching` (T,)), 0 elsewhere
+    (the skin pushes on a barometer but never pulls)."""
+    return jnp.where(touching[:, None], jnp.maximum(jnp.einsum("tsj,csj->tc", bases, amplitudes), 0.0), 0.0)
+
+
 def calc_press_predictions(shape: Prony, onsets, lag, baseline_coefficients, amplitudes, data: PressData):
     """(T, C) one log's readings for given linear parameters (baseline (C, D),
-    amplitudes (C, S, J)): the baseline plus max(0, Σ A B) in contact."""
+    amplitudes (C, S, J)): the baseline plus the elastic part."""
     depths = calc_depths(data, onsets, lag)
-    elastic = jnp.einsum("tsj,csj->tc", calc_bases(shape, depths, data), amplitudes)
-    return data.baseline @ baseline_coefficients.T + jnp.where((depths > 0.0)[:, None], jnp.maximum(elastic, 0.0), 0.0)
+    return data.baseline @ baseline_coefficients.T + calc_elastic(calc_bases(shape, depths, data), depths > 0.0, amplitudes)
 
 
 ONSET_HALF_RANGE = 0.5e-3  # m: a press's onset stays within this of its start value

@@ -2,11 +2,10 @@
 
 All parameters live in one flat vector x, positive ones as logarithms:
 
-    [log E∞]  (full mode only: lumped fits the kernel's shape, E∞ ≡ 1)
+    log E∞
     log E₁ … log E_K, log τ₁ … log τ_K
     log gain  per free channel gain
     θ         per log and channel: offset = base + noise · θ
-    log a_c, log b_c   per log and channel (lumped mode: a_c (δ/δ_max)^b_c)
 
 The residuals are (observed − model) / noise, stacked over logs, samples and columns.
 """
@@ -22,18 +21,13 @@ from ._problem import FitProblem
 class ParameterLayout(eqx.Module):
     """Where each parameter sits in x (static, hashable)."""
 
-    mode: str = eqx.field(static=True)
     num_terms: int = eqx.field(static=True)
     num_gains: int = eqx.field(static=True)
     channel_counts: tuple[int, ...] = eqx.field(static=True)
 
     @property
-    def has_long_term(self) -> bool:
-        return self.mode == "full"
-
-    @property
     def num_material(self) -> int:
-        return int(self.has_long_term) + 2 * self.num_terms
+        return 1 + 2 * self.num_terms
 
     @property
     def num_channels(self) -> int:
@@ -41,20 +35,16 @@ class ParameterLayout(eqx.Module):
 
     @property
     def size(self) -> int:
-        per_channel = 3 if self.mode == "lumped" else 1
-        return self.num_material + self.num_gains + per_channel * self.num_channels
+        return self.num_material + self.num_gains + self.num_channels
 
     def names(self, problem: FitProblem) -> list[str]:
         """Parameter names, in x's order (as in the covariance matrix)."""
-        names = ["log_long_term_modulus"] if self.has_long_term else []
+        names = ["log_long_term_modulus"]
         names += [f"log_modulus_{k + 1}" for k in range(self.num_terms)]
         names += [f"log_tau_{k + 1}" for k in range(self.num_terms)]
         names += [f"log_gain[{name}]" for name in problem.gain_names]
         labels = [f"{k + 1}/{channel}" for k, info in enumerate(problem.infos) for channel in info.channels]
         names += [f"offset[{label}]" for label in labels]
-        if self.mode == "lumped":
-            names += [f"log_amplitude[{label}]" for label in labels]
-            names += [f"log_exponent[{label}]" for label in labels]
         return names
 
     def unpack(self, x):
@@ -67,27 +57,16 @@ class ParameterLayout(eqx.Module):
             at += count
             return piece
 
-        long_term = jnp.exp(take(1)[0]) if self.has_long_term else jnp.ones((), x.dtype)
+        long_term = jnp.exp(take(1)[0])
         moduli = jnp.exp(take(self.num_terms))
         taus = jnp.exp(take(self.num_terms))
         gains = jnp.exp(take(self.num_gains))
         offsets = take(self.num_channels)
-        parameters = {"prony": Prony(long_term, moduli, taus), "gains": gains, "offsets": offsets}
-        if self.mode == "lumped":
-            parameters["amplitudes"] = jnp.exp(take(self.num_channels))
-            parameters["exponents"] = jnp.exp(take(self.num_channels))
-        return parameters
+        return {"prony": Prony(long_term, moduli, taus), "gains": gains, "offsets": offsets}
 
 
 def make_layout(problem: FitProblem, num_terms: int) -> ParameterLayout:
-    return ParameterLayout(mode=problem.mode, num_terms=int(num_terms), num_gains=len(problem.gain_names), channel_counts=tuple(log.num_channels for log in problem.logs))
-
-
-def _lumped_inputs(depth, amplitudes, exponents):
-    """a_c · δ^b_c for δ (T, 1) ≥ 0, with finite gradients at δ = 0."""
-    positive = depth > 0.0
-    power = jnp.exp(exponents[None, :] * jnp.log(jnp.where(positive, depth, 1.0)))
-    return amplitudes[None, :] * jnp.where(positive, power, 0.0)
+    return ParameterLayout(num_terms=int(num_terms), num_gains=len(problem.gain_names), channel_counts=tuple(log.num_channels for log in problem.logs))
 
 
 def calc_predictions(x, problem: FitProblem, layout: ParameterLayout, method: str = "scan"):
@@ -99,12 +78,8 @@ def calc_predictions(x, problem: FitProblem, layout: ParameterLayout, method: st
     first = 0
     for log, count in zip(problem.logs, layout.channel_counts):
         offsets = log.offset_base + log.offset_scale * parameters["offsets"][first : first + count]
-        if layout.mode == "lumped":
-            inputs = _lumped_inputs(log.inputs, parameters["amplitudes"][first : first + count], parameters["exponents"][first : first + count])
-        else:
-            inputs = log.inputs
         first += count
-        response = calc_contact_response(prony, log.times, inputs, method=method)
+        response = calc_contact_response(prony, log.times, log.inputs, method=method)
         gains = gains_all[log.gain_index]  # index -1 picks the fixed 1
         channels = offsets[None, :] + gains[None, :] * response[:, :count]
         predictions.append(jnp.concatenate([channels, response[:, count:]], axis=1))
@@ -117,13 +92,11 @@ def calc_residuals(x, problem: FitProblem, layout: ParameterLayout):
     return jnp.concatenate([((log.observed - prediction) * log.weights[None, :]).reshape(-1) for log, prediction in zip(problem.logs, predictions)])
 
 
-def pack(layout: ParameterLayout, *, long_term, moduli, taus, gains, offsets, amplitudes=None, exponents=None) -> np.ndarray:
+def pack(layout: ParameterLayout, *, long_term, moduli, taus, gains, offsets) -> np.ndarray:
     """The flat x from natural-scale numbers (host)."""
-    pieces = [np.log([long_term])] if layout.has_long_term else []
+    pieces = [np.log([long_term])]
     pieces += [np.log(np.asarray(moduli, dtype=np.float64)), np.log(np.asarray(taus, dtype=np.float64))]
     pieces += [np.log(np.asarray(gains, dtype=np.float64)), np.asarray(offsets, dtype=np.float64)]
-    if layout.mode == "lumped":
-        pieces += [np.log(np.asarray(amplitudes, dtype=np.float64)), np.log(np.asarray(exponents, dtype=np.float64))]
     x = np.concatenate([np.atleast_1d(piece) for piece in pieces])
     assert x.shape == (layout.size,)
     return x

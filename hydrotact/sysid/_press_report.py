@@ -88,6 +88,7 @@ def make_press_report(fit: PressFit) -> dict:
         "num_terms": fit.num_terms,
         "converged": fit.converged,
         "num_steps": fit.num_steps,
+        "num_starts": fit.num_starts,
         "chi_square": fit.chi_square,
         "solver_chi_square": fit.solver_chi_square,
         "dof": fit.dof,

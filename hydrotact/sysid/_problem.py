@@ -7,16 +7,12 @@ log has them) with the model
 
 where (E ∗ u) is the hereditary integral of the unit-modulus response u with the Prony
 relaxation modulus, a contact pushing but never pulling (visco.calc_contact_response).
-Two ways to get u:
-
-- **full**: the log carries the probe pose (`probe_x`, `probe_y`, `probe_z`, optional
-  `probe_rx`..`probe_rz`) and names a sensor spec and a probe; the simulator computes
-  the unit-modulus taxel pressures and contact force once per distinct pose, and the
-  fit runs in that reduced space (the elastic response is linear in E).
-- **lumped**: for a sensor nobody has modelled, a column gives the indentation δ; each
-  channel's elastic response is a monotone power law a_c · (δ/δ_max)^b_c, fitted with
-  the kernel. Then only the shape of E(t) (the ratios Eᵢ/E∞ and τᵢ) is identifiable.
-  Channels that never respond (readings spanning < 20 noise σ) are left out.
+The log carries the probe pose (`probe_x`, `probe_y`, `probe_z`, optional
+`probe_rx`..`probe_rz`) and names a sensor spec and a probe; the simulator computes the
+unit-modulus taxel pressures and contact force once per distinct pose, and the fit runs
+in that reduced space (the elastic response is linear in E). A sensor nobody has
+modelled, pressed by a stage, is fitted by the lumped press model instead
+(`_press_fit.fit_press_logs`, `hydrotact fit --lumped`).
 
 Each channel is weighted by its noise, estimated from the log itself (the median
 absolute second difference, robust to contacts and ramps), so the residuals are in
@@ -38,13 +34,9 @@ from ..data import estimate_noise
 FORCE_COLUMNS = ("fx", "fy", "fz")
 POSE_COLUMNS = ("probe_x", "probe_y", "probe_z")
 ROTATION_COLUMNS = ("probe_rx", "probe_ry", "probe_rz")
-MODES = ("full", "lumped")
 # Channels whose unit response stays below this fraction of the strongest channel's
 # never see the contact: their gain is not identifiable and stays 1.
 _SILENT_FRACTION = 1e-3
-# Lumped mode: channels whose readings span less than this many noise standard
-# deviations do not respond to the indentation.
-_SILENT_SPREAD = 20.0
 
 
 class LogArrays(eqx.Module):
@@ -54,8 +46,7 @@ class LogArrays(eqx.Module):
 
     - `times` (T,) s.
     - `inputs` (T, C + F): unit-modulus responses of the C channels then the F force
-      columns (full mode: Pa and N per Pa of E); lumped mode: the normalised
-      indentation δ/δ_max (T, 1), shared by the channels.
+      columns (Pa and N per Pa of E).
     - `observed` (T, C + F): the channels (Pa) and the reference forces (N).
     - `weights` (C + F,): 1 / noise standard deviation.
     - `offset_base`, `offset_scale` (C,): the channel offset is base + scale · θ.
@@ -78,7 +69,6 @@ class LogInfo:
 
     source: str
     channels: tuple[str, ...]
-    excluded: tuple[str, ...]  # channels left out of the fit (lumped: silent ones)
     force_columns: tuple[str, ...]
     sensor: str | None
     pressure: str
@@ -89,12 +79,11 @@ class LogInfo:
 class FitProblem(eqx.Module):
     """A system-identification problem: the logs and how they are modelled.
 
-    `mode` "full" or "lumped"; `gain_names` the shared channel gains that are free
-    (keyed `sensor/channel`); `logs` LogArrays; `infos` LogInfo per log (static).
+    `gain_names` the shared channel gains that are free (keyed `sensor/channel`);
+    `logs` LogArrays; `infos` LogInfo per log (static).
     """
 
     logs: tuple[LogArrays, ...]
-    mode: str = eqx.field(static=True)
     gain_names: tuple[str, ...] = eqx.field(static=True)
     infos: tuple[LogInfo, ...] = eqx.field(static=True)
 
@@ -106,7 +95,7 @@ class FitProblem(eqx.Module):
         """The same problem without the per-log descriptions: what jitted calls get,
         so that logs of the same shapes share one compilation (the descriptions are
         static and differ from log to log)."""
-        return FitProblem(logs=self.logs, mode=self.mode, gain_names=self.gain_names, infos=())
+        return FitProblem(logs=self.logs, gain_names=self.gain_names, infos=())
 
 
 def _file_digest(path) -> str | None:
@@ -154,7 +143,7 @@ def _channel_values(log) -> np.ndarray:
 
 
 def make_fit_problem(
-    logs, *, mode: str = "full", indentation: str = "indentation", field: str | None = None, num_rays: int | None = None, use_forces: bool = True,
+    logs, *, field: str | None = None, num_rays: int | None = None, use_forces: bool = True,
     unit_responses=None, sources=None, progress: bool = False,
 ) -> FitProblem:
     """Build a FitProblem from BarometerLogs (host).
@@ -163,19 +152,15 @@ def make_fit_problem(
 
     - `logs`: BarometerLogs (hydrotact.data), fitted jointly: one material; offsets
       per log and channel; gains per channel, shared by logs of the same sensor.
-    - `mode`: "full" (simulate the unit responses along the logged probe poses) or
-      "lumped" (a power law of the `indentation` column).
-    - `field`, `num_rays`: full mode's strain field and rays per taxel (default: the
+    - `field`, `num_rays`: the strain field and rays per taxel (default: the
       log's metadata, else laplace and 64).
-    - `use_forces`: full mode: also fit the reference force columns fx, fy, fz when
+    - `use_forces`: also fit the reference force columns fx, fy, fz when
       the log has them; they fix the modulus' scale, so the channel gains are free.
       Without them the gains stay 1 (a gain and E are not separable from pressures).
-    - `unit_responses`: full mode: per log, (taxel pressures (T, C), force (T, 3)) per
+    - `unit_responses`: per log, (taxel pressures (T, C), force (T, 3)) per
       pascal of E, if already computed (else simulated here from the logged poses).
     - `sources`: names for messages and the report (default: the log's path or index).
     """
-    if mode not in MODES:
-        raise HydrotactError(f"unknown fit mode {mode!r}; use one of {', '.join(MODES)}")
     if not logs:
         raise HydrotactError("no logs to fit")
     if num_rays is not None and (int(num_rays) != num_rays or num_rays < 1):
@@ -189,45 +174,25 @@ def make_fit_problem(
         observed = _channel_values(log)
         times = np.asarray(log.times, dtype=np.float64)
         force_columns: tuple[str, ...] = ()
-        if mode == "full":
-            metadata = log.metadata
-            if unit_responses is not None:
-                taxels, forces = (np.asarray(a, dtype=np.float64) for a in unit_responses[k])
-                if taxels.shape != observed.shape or forces.shape != (len(times), 3):
-                    raise HydrotactError(f"{source}: unit responses of shapes {taxels.shape} and {forces.shape} do not match {observed.shape} channels and (T, 3) forces")
-            else:
-                log_field = metadata.get("field", "laplace") if field is None else field
-                log_rays = metadata.get("num_rays", 64) if num_rays is None else num_rays
-                taxels, forces = _unique_pose_responses(log, source, log_field, log_rays, progress)
-            inputs = taxels
-            if use_forces:
-                force_columns = tuple(name for k, name in enumerate(FORCE_COLUMNS) if name in log.columns and np.max(np.abs(forces[:, k])) > 0.0)
-                keep = [FORCE_COLUMNS.index(name) for name in force_columns]
-                inputs = np.column_stack([taxels, forces[:, keep]])
-                observed = np.column_stack([observed] + [np.asarray(log.columns[name], dtype=np.float64) for name in force_columns])
+        metadata = log.metadata
+        if unit_responses is not None:
+            taxels, forces = (np.asarray(a, dtype=np.float64) for a in unit_responses[k])
+            if taxels.shape != observed.shape or forces.shape != (len(times), 3):
+                raise HydrotactError(f"{source}: unit responses of shapes {taxels.shape} and {forces.shape} do not match {observed.shape} channels and (T, 3) forces")
         else:
-            if indentation not in log.columns:
-                raise HydrotactError(f"{source}: no indentation column {indentation!r} for a lumped fit (has {', '.join(log.columns)})")
-            depth = np.asarray(log.columns[indentation], dtype=np.float64)
-            deepest = float(np.max(depth))
-            if not deepest > 0.0:
-                raise HydrotactError(f"{source}: column {indentation!r} is never positive: the probe never indents the skin, so there is nothing to fit")
-            inputs = np.clip(depth / deepest, 0.0, None)[:, None]
+            log_field = metadata.get("field", "laplace") if field is None else field
+            log_rays = metadata.get("num_rays", 64) if num_rays is None else num_rays
+            taxels, forces = _unique_pose_responses(log, source, log_field, log_rays, progress)
+        inputs = taxels
+        if use_forces:
+            force_columns = tuple(name for k, name in enumerate(FORCE_COLUMNS) if name in log.columns and np.max(np.abs(forces[:, k])) > 0.0)
+            keep = [FORCE_COLUMNS.index(name) for name in force_columns]
+            inputs = np.column_stack([taxels, forces[:, keep]])
+            observed = np.column_stack([observed] + [np.asarray(log.columns[name], dtype=np.float64) for name in force_columns])
         noise = estimate_noise(observed)
-        excluded: tuple[str, ...] = ()
-        if mode == "lumped":
-            # A channel the probe never reaches has no response to fit: its amplitude
-            # and exponent would be unidentifiable. It is left out (and reported).
-            spread = np.percentile(observed, 99.5, axis=0) - np.percentile(observed, 0.5, axis=0)
-            silent = spread < _SILENT_SPREAD * noise
-            if silent.all():
-                raise HydrotactError(f"{source}: no channel moves more than {_SILENT_SPREAD:g} noise standard deviations: nothing responds to the indentation")
-            excluded = tuple(name for name, quiet in zip(channels, silent) if quiet)
-            channels = tuple(name for name, quiet in zip(channels, silent) if not quiet)
-            observed, noise = observed[:, ~silent], noise[~silent]
         num_channels = len(channels)
         gain_index = np.full(num_channels, -1)
-        if mode == "full" and force_columns:
+        if force_columns:
             strength = np.max(np.abs(inputs[:, :num_channels]), axis=0)
             for c in np.flatnonzero(strength > _SILENT_FRACTION * strength.max()):
                 name = f"{log.metadata['sensor']}/{channels[c]}"
@@ -249,8 +214,8 @@ def make_fit_problem(
         )
         infos.append(
             LogInfo(
-                source=source, channels=channels, excluded=excluded, force_columns=force_columns, sensor=log.metadata.get("sensor"),
+                source=source, channels=channels, force_columns=force_columns, sensor=log.metadata.get("sensor"),
                 pressure=log.metadata.get("pressure", "absolute"), sha256=_file_digest(source), noise=tuple(float(v) for v in noise),
             )
         )
-    return FitProblem(logs=tuple(prepared), mode=mode, gain_names=tuple(gain_names), infos=tuple(infos))
+    return FitProblem(logs=tuple(prepared), gain_names=tuple(gain_names), infos=tuple(infos))

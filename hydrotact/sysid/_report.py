@@ -21,12 +21,11 @@ from ._fit import FitResult
 
 
 def _material_order(result: FitResult) -> list[int]:
-    """Indices into x of [E∞?, E₁..E_K, τ₁..τ_K] with terms sorted by τ."""
+    """Indices into x of [E∞, E₁..E_K, τ₁..τ_K] with terms sorted by τ."""
     names = result.names
     taus = [result.x[names.index(f"log_tau_{k + 1}")] for k in range(result.layout.num_terms)]
     order = np.argsort(taus)
-    head = [names.index("log_long_term_modulus")] if result.layout.has_long_term else []
-    return head + [names.index(f"log_modulus_{k + 1}") for k in order] + [names.index(f"log_tau_{k + 1}") for k in order]
+    return [names.index("log_long_term_modulus")] + [names.index(f"log_modulus_{k + 1}") for k in order] + [names.index(f"log_tau_{k + 1}") for k in order]
 
 
 def make_fit_material(result: FitResult, paths=(), name: str | None = None) -> dict:
@@ -35,7 +34,7 @@ def make_fit_material(result: FitResult, paths=(), name: str | None = None) -> d
     index = _material_order(result)
     covariance = result.covariance[np.ix_(index, index)]
     count = result.layout.num_terms
-    parameters = (["log_long_term_modulus"] if result.layout.has_long_term else []) + [f"log_modulus_{k + 1}" for k in range(count)] + [f"log_tau_{k + 1}" for k in range(count)]
+    parameters = ["log_long_term_modulus"] + [f"log_modulus_{k + 1}" for k in range(count)] + [f"log_tau_{k + 1}" for k in range(count)]
     channels = []
     gains = result.gains
     for info, offsets in zip(result.problem.infos, result.offsets()):
@@ -50,7 +49,7 @@ def make_fit_material(result: FitResult, paths=(), name: str | None = None) -> d
     sensors = sorted({info.sensor for info in result.problem.infos if info.sensor})
     provenance = {
         "method": "fit",
-        "mode": result.problem.mode,
+        "mode": "full",
         "solver": result.solver_name,
         "logs": [{"path": str(path), **({"sha256": info.sha256} if info.sha256 else {})} for path, info in zip(paths or [i.source for i in result.problem.infos], result.problem.infos)],
         "num_samples": int(sum(int(log.times.shape[0]) for log in result.problem.logs)),
@@ -65,14 +64,12 @@ def make_fit_material(result: FitResult, paths=(), name: str | None = None) -> d
         [m.value for m, _ in terms],
         [t.value for _, t in terms],
         stds={"long_term_modulus": result.long_term_modulus.std, "moduli": [m.std for m, _ in terms], "taus": [t.std for _, t in terms]},
-        covariance={"parameters": parameters, "space": "log", "matrix": covariance.tolist()} if parameters else None,
+        covariance={"parameters": parameters, "space": "log", "matrix": covariance.tolist()},
         channels=channels or None,
         provenance=provenance,
         name=name,
-        description=f"Fitted by hydrotact {__version__} ({result.problem.mode} mode, {count} Prony terms, solver {result.solver_name}).",
+        description=f"Fitted by hydrotact {__version__} (full mode, {count} Prony terms, solver {result.solver_name}).",
     )
-    if not result.layout.has_long_term:
-        document["modulus_scale"] = "relative"
     return document
 
 
@@ -80,7 +77,7 @@ def make_report(result: FitResult) -> dict:
     """The fit's numbers as a JSON-ready dict."""
     report = {
         "generator": f"hydrotact {__version__}",
-        "mode": result.problem.mode,
+        "mode": "full",
         "solver": result.solver_name,
         "num_terms": result.layout.num_terms,
         "converged": result.converged,
@@ -98,22 +95,6 @@ def make_report(result: FitResult) -> dict:
         "offsets_Pa": [{"source": info.source, "channels": {k: v.to_json() for k, v in offsets.items()}} for info, offsets in zip(result.problem.infos, result.offsets())],
         "residuals": result.residual_diagnostics(),
     }
-    excluded = {info.source: list(info.excluded) for info in result.problem.infos if info.excluded}
-    if excluded:
-        report["channels_left_out"] = excluded
-    if result.problem.mode == "lumped":
-        report["modulus_scale"] = "relative"
-        k = result.layout.num_material + result.layout.num_gains + result.layout.num_channels
-        count = result.layout.num_channels
-        labels = [n[len("log_amplitude[") : -1] for n in result.names[k : k + count]]
-        std = result.std_log
-        report["elastic_response"] = {
-            label: {
-                "amplitude_Pa": {"value": float(np.exp(result.x[k + c])), "std": float(np.exp(result.x[k + c]) * std[k + c])},
-                "exponent": {"value": float(np.exp(result.x[k + count + c])), "std": float(np.exp(result.x[k + count + c]) * std[k + count + c])},
-            }
-            for c, label in enumerate(labels)
-        }
     if result.criteria:
         report["criterion"] = {"name": "bic", "by_num_terms": {str(k): v for k, v in result.criteria.items()}}
     return report
@@ -126,15 +107,13 @@ def calc_relaxation_band(result: FitResult, times, draws: int = 400, seed: int =
     mean = result.x[index]
     covariance = result.covariance[np.ix_(index, index)]
     rng = np.random.default_rng(seed)
-    samples = rng.multivariate_normal(mean, covariance, size=draws, method="eigh") if len(index) else np.zeros((draws, 0))
-    head = int(result.layout.has_long_term)
+    samples = rng.multivariate_normal(mean, covariance, size=draws, method="eigh")
     count = result.layout.num_terms
 
     def moduli(x):  # E(t) for rows of log parameters x (NumPy, all draws at once)
         x = np.atleast_2d(x)
-        long_term = np.exp(x[:, 0]) if head else np.ones(len(x))
-        terms = np.exp(x[:, head : head + count])[:, None, :] * np.exp(-times[None, :, None] / np.exp(x[:, head + count :])[:, None, :])
-        return long_term[:, None] + terms.sum(axis=-1)
+        terms = np.exp(x[:, 1 : 1 + count])[:, None, :] * np.exp(-times[None, :, None] / np.exp(x[:, 1 + count :])[:, None, :])
+        return np.exp(x[:, 0])[:, None] + terms.sum(axis=-1)
 
     curves = moduli(samples)
     return moduli(mean)[0], np.percentile(curves, 2.5, axis=0), np.percentile(curves, 97.5, axis=0)

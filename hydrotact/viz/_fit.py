@@ -70,7 +70,7 @@ def plot_fit(result, out_dir) -> dict:
     step = min(float(np.min(np.diff(np.asarray(log.times)))) for log in logs)
     times = np.logspace(np.log10(step / 2), np.log10(span * 2), 200)
     modulus, low, high = calc_relaxation_band(result, times)
-    unit, label = (1e3, "E(t) [kPa]") if result.layout.has_long_term else (1.0, "E(t) / E∞")
+    unit, label = 1e3, "E(t) [kPa]"
     figure, axis = plt.subplots(figsize=(6.5, 4))
     axis.fill_between(times, low / unit, high / unit, alpha=0.3, label="95 % band")
     axis.semilogx(times, modulus / unit, "k", lw=1.2, label="fitted")
