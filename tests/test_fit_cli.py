@@ -437,6 +437,14 @@ def _case_not_parquet(tmp_path, lumped_parquet):
     return ["fit", data, "--lumped", "-o", "{out}"], ["broken.parquet", "not a readable Parquet file"]
 
 
+def _case_starts_zero(tmp_path, lumped_parquet):
+    return ["fit", lumped_parquet, "--lumped", "--starts", "0", "-o", "{out}"], ["--starts", "auto or 1 to 3", "'0'"]
+
+
+def _case_starts_text(tmp_path, lumped_parquet):
+    return ["fit", lumped_parquet, "--lumped", "--starts", "many", "-o", "{out}"], ["--starts", "'many'"]
+
+
 FIT_CASES = {
     "missing-log": _case_missing_log,
     "full-mode-without-pose": _case_full_without_pose,
@@ -454,6 +462,8 @@ FIT_CASES = {
     "never-indented": _case_never_indented,
     "too-short": _case_too_short,
     "not-parquet": _case_not_parquet,
+    "starts-zero": _case_starts_zero,
+    "starts-text": _case_starts_text,
 }
 
 

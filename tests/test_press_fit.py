@@ -19,6 +19,7 @@ from hydrotact import HydrotactError
 from hydrotact.cli import main
 from hydrotact.data import write_log
 from hydrotact.sim import FINGERTIP_SENSOR, StageSession, make_site_grid, simulate_stage_log
+from hydrotact.sysid import _press_fit as press_fit_module
 from hydrotact.sysid import compare_fit, fit_press_logs, write_press_fit_outputs
 from hydrotact.sysid._press_data import SITE_RESPONSE_SNR, site_responses
 from hydrotact.visco import Prony
@@ -88,6 +89,28 @@ def test_one_log_recovers_the_shape_onsets_and_lag(one_log_fit):
     assert fit.channels == ("f0", "f1", "f2")  # f3 is dead
     assert any("f3" in message and "not fitted" in message for message in messages)
     assert any("clipped" in message and "f0" in message for message in messages)
+
+
+def test_a_fit_far_from_the_noise_tries_other_shapes(one_log_fit, stand_in, monkeypatch):
+    """starts="auto": a fit that ends above a reduced χ² of 1.5 is tried from the next
+    relaxation shape, and the lowest χ² is kept. Here a first start of τ x 0.05 and
+    Eᵢ/E∞ 0.01 is put before the default ones: from it alone the fit ends in a local
+    minimum (reduced χ² 4.4, τ 0.035 s and 64 s); "auto" goes on to the next start,
+    which is the default fit's. (The default starts' own case: notebook 02's stage
+    log cut before its gap, 2 presses, 40 % relaxation, ends at 10.8 from the first
+    and at 1.01 from the second.)"""
+    default, truth, _ = one_log_fit
+    path, log, _ = stand_in["calibration"][0]
+    monkeypatch.setattr(press_fit_module, "SHAPE_STARTS", ((0.05, 0.01), *press_fit_module.SHAPE_STARTS))
+    alone = fit_press_logs([log], [str(path)], terms=2, estimate_lag=True, saturation_pa=125e3, starts=1)
+    assert alone.num_starts == 1 and alone.reduced_chi_square > press_fit_module.RESTART_REDUCED_CHI2
+    again = fit_press_logs([log], [str(path)], terms=2, estimate_lag=True, saturation_pa=125e3)
+    assert again.num_starts == 2 and default.num_starts == 1
+    assert again.chi_square == pytest.approx(default.chi_square, rel=1e-9)
+    every = fit_press_logs([log], [str(path)], terms=2, estimate_lag=True, saturation_pa=125e3, starts=3)
+    assert every.num_starts == 3 and every.chi_square <= again.chi_square * (1 + 1e-9)
+    with pytest.raises(HydrotactError, match="--starts"):
+        fit_press_logs([log], [str(path)], terms=2, starts=0)
 
 
 def test_a_law_is_fitted_only_where_the_channel_responds():

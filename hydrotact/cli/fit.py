@@ -45,8 +45,8 @@ def add_parser(subparsers):
         help="--lumped: a press is where the travel is above its rest level by this fraction of its range (default 0.05)",
     )
     parser.add_argument(
-        "--starts", type=int, default=3, metavar="N",
-        help="--lumped: relaxation shapes to start from, at most (1-3, default 3): the next is tried while the fit ends above a reduced chi2 of 1.5, the lowest kept",
+        "--starts", default="auto", metavar="auto|N",
+        help="--lumped: relaxation shapes to start from (the lowest chi2 is kept): auto (default) tries the next of 3 while a fit ends above a reduced chi2 of 1.5; N (1-3) tries the first N",
     )
     parser.add_argument("--max-steps", type=int, metavar="N", help="solver steps before it stops (default 400; the minimisers 4000)")
     parser.add_argument("--mapping", type=Path, metavar="MAP.json", help="column mapping for logs of your own layout")
@@ -61,7 +61,7 @@ def add_parser(subparsers):
 
 
 def run(args) -> None:
-    from ..sysid import fit_logs, parse_drift
+    from ..sysid import fit_logs, parse_drift, parse_starts
     from ..viz import plot_fit, plot_press_fit
 
     press_options = None
@@ -69,7 +69,7 @@ def run(args) -> None:
         press_options = {
             "position_columns": tuple(name for name in args.position_columns.split(",") if name), "drift": parse_drift(args.drift), "lag": args.lag,
             "estimate_lag": args.estimate_lag, "saturation_pa": args.saturation, "threshold": args.press_threshold,
-            "starts": args.starts,
+            "starts": parse_starts(args.starts),
         }
     report = fit_logs(
         args.logs, args.output, sensor=args.sensor, lumped=args.lumped, indentation=args.indentation, mapping=args.mapping,
@@ -149,7 +149,7 @@ def print_press_table(report: dict) -> None:
             row(f"lag {log['source']}", log["lag_s"], " s")
     Console().print(table)
     if report.get("num_starts", 1) > 1:
-        print(f"  fitted from {report['num_starts']} relaxation shapes (a fit ended above a reduced χ² of 1.5); the lowest χ² is kept")
+        print(f"  fitted from {report['num_starts']} relaxation shapes (--starts); the lowest χ² is kept")
     for entry in report["residuals"]:
         cells = ", ".join(f"{name} {c['rms_Pa']:.3g} Pa (R² {c['r2']:.5f})" for name, c in entry["channels"].items() if c["rms_Pa"] is not None)
         print(f"  {entry['source']}: RMS residual {cells}")

@@ -36,6 +36,7 @@ from ._press_data import parse_drift as parse_drift
 from ._press_fit import Parameter as Parameter
 from ._press_fit import PressFit as PressFit
 from ._press_fit import fit_press_logs as fit_press_logs
+from ._press_fit import parse_starts as parse_starts
 from ._press_report import write_press_fit_outputs as write_press_fit_outputs
 from ._presses import (
     Presses as Presses,

@@ -129,14 +129,26 @@ def _press_durations(log: PressLog) -> np.ndarray:
     return np.array([np.ptp(log.times[log.press == p]) for p in range(len(log.onset_start))])
 
 
-# The shape's starts, tried in turn while the fit stays far from the noise: (factor on
-# the τ grid, Eᵢ/E∞). With a law of its own per site, an onset can trade against the
+# The shape's starts (factor on the τ grid, Eᵢ/E∞), tried in turn while the fit ends
+# far from the noise (starts="auto"), or all of the first N (starts=N). With a law of its own per site, an onset can trade against the
 # shape: on notebook 02's stage log cut before its gap (2 presses, 40 % relaxation),
 # the first start ends at a reduced χ² of 10.8 (τ 2.3 s and 118 s), the other two at
 # 1.01, at the true shape.
 SHAPE_STARTS = ((1.0, 0.05), (0.3, 0.3), (3.0, 0.3))
-RESTART_REDUCED_CHI2 = 1.5  # a fit that ends above this is tried from the next start
-MAX_STARTS = len(SHAPE_STARTS)
+RESTART_REDUCED_CHI2 = 1.5  # starts="auto": a fit that ends above this is tried from the next start
+
+
+def parse_starts(text) -> int | str:
+    """--starts: 'auto' or a number of shape starts (1 to len(SHAPE_STARTS))."""
+    if str(text) == "auto":
+        return "auto"
+    try:
+        value = int(text)
+    except ValueError:
+        value = None
+    if value is None or not 1 <= value <= len(SHAPE_STARTS):
+        raise HydrotactError(f"--starts: expected auto or 1 to {len(SHAPE_STARTS)} starts, got {text!r}")
+    return value
 
 
 def _initial_x(layout: PressLayout, logs: list[PressLog], lag: float = 0.0, start: tuple[float, float] = SHAPE_STARTS[0]) -> np.ndarray:
@@ -213,16 +225,18 @@ def _press_outputs(layout, x, args):
 
 
 def _fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps, starts, num_used, num_linear):
-    """Fit `num_terms` terms from the shape starts in turn, until one ends at a
-    reduced χ² (the model's own) below RESTART_REDUCED_CHI2: (the lowest own χ²'s
-    layout, args, solution, (own χ², solver's χ²), outputs, number of starts tried)."""
+    """Fit `num_terms` terms from the shape starts in turn (starts "auto": until one
+    ends at a reduced χ², the model's own, below RESTART_REDUCED_CHI2; N: the first
+    N): (the lowest own χ²'s layout, args, solution, (own χ², solver's χ²), outputs,
+    the number of starts tried)."""
     layout = PressLayout(num_terms, tuple(len(log.onset_start) for log in logs), estimate_lag)
     responds = site_responses(logs, num_sites)
     datas = tuple(log.to_data(num_sites, responds) for log in logs)
     args = (datas, tuple(jnp.asarray(log.onset_start) for log in logs), tuple(jnp.asarray(float(lag)) for _ in logs))
     dof = max(num_used - layout.size - num_linear, 1)
     best, tried = None, 0
-    for start in starts if num_terms else starts[:1]:  # no terms, no shape to start
+    candidates = SHAPE_STARTS if starts == "auto" else SHAPE_STARTS[:starts]
+    for start in candidates if num_terms else candidates[:1]:  # no terms, no shape to start
         tried += 1
         solution = _solve_press(layout, solver, max_steps, jnp.asarray(_initial_x(layout, logs, lag, start)), args)
         outputs = _press_outputs(layout, solution.value, args)
@@ -230,14 +244,14 @@ def _fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps,
         if best is None or chi_square < best[3][0]:
             solver_chi_square = float(jnp.sum(press_residual_fn(layout)(solution.value, args) ** 2))
             best = (layout, args, solution, (chi_square, solver_chi_square), outputs)
-        if best[3][0] / dof < RESTART_REDUCED_CHI2:
+        if starts == "auto" and best[3][0] / dof < RESTART_REDUCED_CHI2:
             break
     return *best, tried
 
 
 def fit_press_logs(
     logs, sources=None, *, terms="auto", indentation="indentation", position_columns=POSITION_COLUMNS, drift=DRIFT_KNOT_S,
-    lag=0.0, estimate_lag=False, saturation_pa=None, threshold=PRESS_THRESHOLD, solver=None, max_steps=400, starts=MAX_STARTS, report=None,
+    lag=0.0, estimate_lag=False, saturation_pa=None, threshold=PRESS_THRESHOLD, solver=None, max_steps=400, starts="auto", report=None,
 ) -> PressFit:
     """Fit the lumped press model jointly to stage logs (see the module's docstring).
 
@@ -249,10 +263,10 @@ def fit_press_logs(
     (the start when `estimate_lag`); `saturation_pa` the upper reading limit (default:
     the log's part's, for absolute logs of a known sensor); `threshold` the press
     threshold (fraction of the travel's range); `solver` a least-squares solver
-    object or name (default Levenberg-Marquardt); `max_steps`; `starts` how many of
-    the shape starts SHAPE_STARTS to try at most: the next is tried while the fit
-    ends at a reduced χ² above RESTART_REDUCED_CHI2, and the lowest χ² kept (1: the
-    first start only); `report(message)` receives the skipped channels and logs and
+    object or name (default Levenberg-Marquardt); `max_steps`; `starts` the relaxation
+    shapes to start from (SHAPE_STARTS): "auto" tries the next while the fit ends at
+    a reduced χ² above RESTART_REDUCED_CHI2, a number N the first N, and the lowest
+    χ² is kept; `report(message)` receives the skipped channels and logs and
     the warnings.
 
     **Returns:** a :class:`PressFit`.
@@ -273,8 +287,8 @@ def _fit_press_logs(logs, sources, *, terms, indentation, position_columns, drif
         raise HydrotactError(f"--terms: a lumped fit takes 0 to {MAX_TERMS} Prony terms or auto, got {terms!r}")
     if not (isinstance(max_steps, int) and max_steps >= 1):
         raise HydrotactError(f"--max-steps: expected a positive whole number of steps, got {max_steps!r}")
-    if not (isinstance(starts, int) and 1 <= starts <= MAX_STARTS):
-        raise HydrotactError(f"--starts: expected 1 to {MAX_STARTS} starts, got {starts!r}")
+    if starts != "auto" and not (isinstance(starts, int) and 1 <= starts <= len(SHAPE_STARTS)):
+        raise HydrotactError(f"--starts: expected auto or 1 to {len(SHAPE_STARTS)} starts, got {starts!r}")
     if not abs(float(lag)) < LAG_BOUND:
         raise HydrotactError(f"--lag: expected a lag within ±{LAG_BOUND:g} s, got {lag!r}")
     solver = make_solver(solver or "lm") if solver is None or isinstance(solver, str) else solver
@@ -287,7 +301,7 @@ def _fit_press_logs(logs, sources, *, terms, indentation, position_columns, drif
     counts = range(1, MAX_TERMS + 1) if terms == "auto" else [terms]
     best = None
     for count in counts:
-        layout, args, solution, chi_squares, outputs, tried = _fit_terms(count, prepared, len(sites), estimate_lag, lag, solver, max_steps, SHAPE_STARTS[:starts], num_used, num_linear)
+        layout, args, solution, chi_squares, outputs, tried = _fit_terms(count, prepared, len(sites), estimate_lag, lag, solver, max_steps, starts, num_used, num_linear)
         bic = chi_squares[0] + (layout.size + num_linear) * math.log(num_used)
         if best is None or bic < best[0]:
             best = (bic, count, layout, args, solution, chi_squares, outputs, tried)
