@@ -182,9 +182,8 @@ def compare_log(document, report, log, source, *, tare="no-load", drift=None, sa
     times = np.asarray(log.times, dtype=np.float64)
     travel = np.asarray(log.columns[law["indentation"]], dtype=np.float64)
     mask = ~find_clipped(observed, upper_limit(log, source, saturation_pa)) & ~find_kinks(times, travel)[:, None]
-    for start, end in zip(presses.starts[~keep | presses.unseen], presses.ends[~keep | presses.unseen]):
-        mask[start:end] = False
-    kept = dataclasses.replace(presses, starts=presses.starts[keep], ends=presses.ends[keep], sites=presses.sites[keep], unseen=presses.unseen[keep])
+    mask[presses.select(~keep | presses.unseen).press_of_samples(log.num_samples) >= 0] = False
+    kept = presses.select(keep)
     press = kept.press_of_samples(log.num_samples)
     data = make_press_data(times - times[0], travel, press, site_ids, np.zeros(observed.shape), np.ones(observed.shape), np.zeros((len(times), 1)), len(sites))
     depths = calc_depths(data, jnp.asarray(onsets), lag)

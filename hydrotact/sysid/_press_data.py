@@ -304,14 +304,13 @@ def prepare_press_logs(
         times = np.asarray(log.times, dtype=np.float64)
         travel = np.asarray(log.columns[indentation], dtype=np.float64)
         mask = ~masked[:, fitted]
-        for start, end in zip(presses.starts[presses.unseen], presses.ends[presses.unseen]):
-            mask[start:end] = False
+        mask[presses.select(presses.unseen).press_of_samples(log.num_samples) >= 0] = False
         # A press that began in a gap stays in the model, its samples masked: its loading
         # is unseen, but its memory lifts the next presses' readings as the skin
         # recovers (by ~70 Pa over a hold on a skin relaxing 40 %; dropped, it left the
         # log after the gap at a reduced chi2 of ~58 at the true relaxation). Its
         # onset starts at the median of the others'.
-        seen = dataclasses.replace(presses, starts=presses.starts[~presses.unseen], ends=presses.ends[~presses.unseen], sites=presses.sites[~presses.unseen], unseen=presses.unseen[~presses.unseen])
+        seen = presses.select(~presses.unseen)
         onset_start = np.full(presses.num_presses, np.nan)
         onset_start[~presses.unseen] = _first_onsets(travel, observed[:, fitted], mask, seen, noise[fitted], float(lag), times)
         onset_start[presses.unseen] = np.median(onset_start[~presses.unseen])

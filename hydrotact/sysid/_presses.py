@@ -52,6 +52,11 @@ class Presses:
     def num_sites(self) -> int:
         return len(self.positions)
 
+    def select(self, keep) -> "Presses":
+        """The presses where `keep` (P,) is True (the sites and positions unchanged)."""
+        keep = np.asarray(keep, dtype=bool)
+        return dataclasses.replace(self, starts=self.starts[keep], ends=self.ends[keep], sites=self.sites[keep], unseen=self.unseen[keep])
+
     def press_of_samples(self, num_samples: int) -> np.ndarray:
         """(T,) the press each sample belongs to, -1 between presses."""
         index = np.full(num_samples, -1)
