@@ -526,12 +526,21 @@ display(Image(press_report["files"]["traces_png"], width=760))
 # on the console and in `report.json`.
 #
 # The held-out log, predicted from the fit (`hydrotact compare`): RMS and R² per channel,
-# and the RMS of the hold shapes (the relaxation), against the channel's noise.
+# and the RMS of the hold shapes (the relaxation), against the channel's noise. The
+# held-out session's stage home differs from the calibration's (the stand-in draws it
+# with a 0.1 mm spread), so `compare` fits one shift of every onset to the log, and
+# gives each prediction a band from the fit's covariance; the normalized RMS is the
+# error over √(noise² + band²).
 
 # %%
 comparison = compare_fit(OUT / "fit_press", [stage_logs["held_out"]], OUT / "compare_press", plot=plot_comparisons)
+home = comparison["logs"][0]["home_shift_m"]
+print(f"the held-out log's onsets, shifted {home['value'] * 1e3:+.3f} ± {home['std'] * 1e3:.4f} mm (its home)")
 for name, numbers in comparison["logs"][0]["channels"].items():
-    print(f"{name}: RMS {numbers['rms_Pa']:.1f} Pa, R² {numbers['r2']:.4f}, hold shape RMS {numbers['hold_shape_rms_Pa']:.1f} Pa (noise {numbers['noise_Pa']:.1f} Pa)")
+    print(
+        f"{name}: RMS {numbers['rms_Pa']:.1f} Pa, R² {numbers['r2']:.4f}, hold shape RMS {numbers['hold_shape_rms_Pa']:.1f} Pa "
+        f"(noise {numbers['noise_Pa']:.1f} Pa, band {numbers['prediction_std_Pa']:.1f} Pa, normalized RMS {numbers['normalized_rms']:.2f})"
+    )
 for path in comparison["files"].values():
     if str(path).endswith(".png"):
         display(Image(path, width=760))

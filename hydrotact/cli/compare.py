@@ -18,6 +18,10 @@ def add_parser(subparsers):
             "a channel's push is 0), the mean of its first S seconds, or fitted to all samples (the fit's own)"
         ),
     )
+    parser.add_argument(
+        "--home", default="estimate", choices=("estimate", "fit"),
+        help="the stage's home (the travel column's zero) differs between sessions: fit one shift of every onset to each log (default), or use the fit's onsets as they are",
+    )
     parser.add_argument("-o", "--output", required=True, type=Path, metavar="DIR", help="folder for compare.json, the predicted logs and plots")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
     return parser
@@ -27,14 +31,19 @@ def run(args) -> None:
     from ..sysid import compare_fit
     from ..viz import plot_comparisons
 
-    report = compare_fit(args.fit_dir, args.logs, args.output, mapping=args.mapping, tare=args.tare, report_warning=_warn, plot=plot_comparisons)
+    report = compare_fit(args.fit_dir, args.logs, args.output, mapping=args.mapping, tare=args.tare, home=args.home, report_warning=_warn, plot=plot_comparisons)
     if args.json:
         print(json.dumps(report, indent=2))
         return
     for entry in report["logs"]:
-        print(f"{entry['source']}:")
+        home = entry["home_shift_m"]
+        shift = "" if home is None else f" (onsets shifted {home['value'] * 1e3:+.4f} ± {home['std'] * 1e3:.4f} mm: its home)"
+        print(f"{entry['source']}:{shift}")
         for name, c in entry["channels"].items():
-            print(f"  {name}: RMS {_fmt(c['rms_Pa'])} Pa (noise {_fmt(c['noise_Pa'])} Pa), R² {_fmt(c['r2'], '.5f')}, hold shape RMS {_fmt(c['hold_shape_rms_Pa'])} Pa")
+            print(
+                f"  {name}: RMS {_fmt(c['rms_Pa'])} Pa (noise {_fmt(c['noise_Pa'])} Pa, prediction band {_fmt(c['prediction_std_Pa'])} Pa; "
+                f"normalized {_fmt(c['normalized_rms'])}), R² {_fmt(c['r2'], '.5f')}, hold shape RMS {_fmt(c['hold_shape_rms_Pa'])} Pa"
+            )
     print(f"hydrotact compare: results in {args.output}/")
     for path in report["files"].values():
         print(f"  {path}")

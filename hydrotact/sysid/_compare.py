@@ -18,8 +18,25 @@ baseline, the *tare*, which comes from the log itself:
 - "all": the baseline that best fits all samples with the law fixed — what the fit
   itself does, so a fit's own log comes back with the fit's residuals.
 
+The stage's *home* (the travel column's zero) differs between sessions: a held-out
+log's contact onsets are the fit's per-site onsets shifted by one unknown amount.
+With home="estimate" (the default) that shift is fitted to the log (one number: the
+least squares over a grid of ±ONSET_HALF_RANGE, then Brent's method, each channel's
+baseline solved with it); with home="fit" the fit's onsets are used as they are.
+
+The prediction comes with a band, each sample's standard deviation from what is not
+known exactly: the fit's parameters (the relaxation shape, the sites' onsets, the lag
+and the amplitudes, from the covariance the fit writes beside material.json), the
+estimated home shift, and the tare (the noise of the samples it is taken from).
+`normalized_rms` is the RMS of the error over √(noise² + band²): ≈ 1 where the
+prediction is as good as the fit's logs allow. The band is first order, and a lower
+bound where a site's onset trades against its law (a flat, curved valley): on the test
+stand-in the law's error at a few (site, channel) pairs is 3-5 band sigmas, the same
+in every held-out log, and the normalized RMS is 1.04-1.37 (1.08-1.53 without the
+band).
+
 For a log the fit used (the same SHA-256), the fit's own onsets and lag for that log
-(from its report.json) replace the per-site means.
+(from its report.json) replace the per-site means, and no home shift is fitted.
 """
 
 import dataclasses
@@ -27,6 +44,7 @@ import json
 import warnings
 from pathlib import Path
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -34,13 +52,20 @@ import numpy as np
 from .._errors import HydrotactError
 from ..data import estimate_noise, read_material
 from ..visco import Prony
-from ._lumped import calc_elastic, solve_baselines
+from ._lumped import ONSET_HALF_RANGE, calc_elastic, solve_baselines
 from ._press_data import DRIFT_KNOT_S, drift_basis, find_clipped, find_kinks, upper_limit
-from ._press_windows import POWERS, calc_bases, calc_depths, make_press_data
+from ._press_windows import POWERS, PressData, calc_bases, calc_depths, make_press_data
 from ._presses import SITE_TOLERANCE, find_log_presses
 from ._problem import _file_digest
+from ._solve import make_solver, solve_least_squares
 
 HOLD_TOLERANCE = 1e-6  # m: a press holds where its travel is within this of its deepest
+HOME_GRID = 41  # shifts over ±ONSET_HALF_RANGE tried before the home shift is polished
+HOMES = ("estimate", "fit")
+BAND_NOTE = (
+    "1 sigma, first order in the fit's parameters, the home shift and the tare: a lower bound where a site's onset trades "
+    "against its law (on the test stand-in, single presses' errors reach 3-5 band sigmas)"
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -49,7 +74,12 @@ class Comparison:
     (s), `observed`, `predicted` (T, C) Pa (the tare included), `mask` (T, C) True
     where compared, `hold` (T,) the press held at each sample (-1 elsewhere), and
     per channel `rms_pa`, `r2`, `hold_shape_rms_pa` (the residual during holds less
-    each hold's mean: how well the relaxation's shape is predicted), `noise_pa`."""
+    each hold's mean: how well the relaxation's shape is predicted), `noise_pa`;
+    `predicted_std` (T, C) the prediction's standard deviation, Pa (NaN without the
+    fit's covariance), per channel `prediction_std_pa` (its RMS over the compared
+    samples) and `normalized_rms` (the error over √(noise² + band²)); `home_shift_m`
+    and `home_shift_std_m` the fitted shift of the log's onsets (None where not
+    fitted)."""
 
     source: str
     channels: tuple
@@ -62,13 +92,21 @@ class Comparison:
     r2: np.ndarray
     hold_shape_rms_pa: np.ndarray
     noise_pa: np.ndarray
+    predicted_std: np.ndarray
+    prediction_std_pa: np.ndarray
+    normalized_rms: np.ndarray
+    home_shift_m: float | None = None
+    home_shift_std_m: float | None = None
 
     def to_json(self) -> dict:
+        home = None if self.home_shift_m is None else {"value": self.home_shift_m, "std": self.home_shift_std_m}
         return {
             "source": self.source,
+            "home_shift_m": home,
             "channels": {
                 name: {
                     "rms_Pa": _number(self.rms_pa[c]), "r2": _number(self.r2[c]), "hold_shape_rms_Pa": _number(self.hold_shape_rms_pa[c]), "noise_Pa": _number(self.noise_pa[c]),
+                    "prediction_std_Pa": _number(self.prediction_std_pa[c]), "normalized_rms": _number(self.normalized_rms[c]),
                 }
                 for c, name in enumerate(self.channels)
             },
@@ -95,8 +133,8 @@ def parse_tare(text):
 
 
 def read_fit(fit_dir):
-    """(material document, report dict or None) of a fit folder, checked to hold a
-    lumped press fit."""
+    """(material document, report dict or None, the channel law's covariance {qq,
+    qa, aa} or None) of a fit folder, checked to hold a lumped press fit."""
     fit_dir = Path(fit_dir)
     path = fit_dir / "material.json" if fit_dir.is_dir() else fit_dir
     if not path.is_file():
@@ -106,7 +144,26 @@ def read_fit(fit_dir):
         raise HydrotactError(f"{path}: no channel_law: compare needs a lumped press fit (`hydrotact fit --lumped`), which records each channel's law")
     report_path = path.parent / "report.json"
     report = json.loads(report_path.read_text(encoding="utf-8")) if report_path.is_file() else None
-    return document, report
+    return document, report, _read_covariance(path, document["channel_law"])
+
+
+def _read_covariance(material_path, law):
+    """The covariance file material.json names, checked against its law's sizes
+    (None where it names none)."""
+    if "covariance_file" not in law:
+        return None
+    path = material_path.parent / law["covariance_file"]
+    try:
+        with np.load(path) as data:
+            covariance = {key: np.asarray(data[key], dtype=np.float64) for key in ("qq", "qa", "aa")}
+    except (OSError, KeyError, ValueError) as error:
+        raise HydrotactError(f"{path}: cannot read the channel law's covariance ({error}); refit, or remove covariance_file from {material_path}") from None
+    num_sites, num_channels, num_powers = len(law["sites"]), len(law["channels"]), len(law["powers"])
+    num_q = covariance["qq"].shape[0]
+    expected = {"qq": (num_q, num_q), "qa": (num_channels, num_q, num_sites * num_powers), "aa": (num_channels, num_sites * num_powers, num_sites * num_powers)}
+    if any(covariance[key].shape != shape for key, shape in expected.items()) or (num_q - num_sites - 1) % 2:
+        raise HydrotactError(f"{path}: its sizes do not match {material_path}'s channel law ({num_channels} channels, {num_sites} sites); refit")
+    return covariance
 
 
 def _law_prony(document) -> Prony:
@@ -144,11 +201,14 @@ def _solve_baseline(basis, observed, elastic, used):
     return np.asarray(solve_baselines(jnp.asarray(basis), jnp.asarray(observed - elastic), jnp.asarray(used))).T
 
 
-def compare_log(document, report, log, source, *, tare="no-load", drift=None, saturation_pa=None, report_message=None) -> Comparison:
-    """Predict one log from a fit (see the module's docstring)."""
+def compare_log(document, report, log, source, *, tare="no-load", home="estimate", covariance=None, drift=None, saturation_pa=None, report_message=None) -> Comparison:
+    """Predict one log from a fit (see the module's docstring); `covariance` the
+    channel law's (from :func:`read_fit`; None: no band)."""
     say = report_message or (lambda message: None)
     law = document["channel_law"]
     tare = parse_tare(tare) if isinstance(tare, str) else tare
+    if home not in HOMES:
+        raise HydrotactError(f"--home: expected one of {', '.join(HOMES)}, got {home!r}")
     channels = tuple(law["channels"])
     if tuple(law["powers"]) != tuple(POWERS):
         raise HydrotactError(f"channel_law: powers {law['powers']} are not this version's {list(POWERS)}; refit with this hydrotact")
@@ -168,6 +228,7 @@ def compare_log(document, report, log, source, *, tare="no-load", drift=None, sa
         lag = float(own["lag_s"]["value"])
         keep = np.ones(presses.num_presses, dtype=bool)
     else:
+        own = None
         site_ids = np.array([_site_of(presses.positions[s], sites) for s in presses.sites])
         unknown = (site_ids < 0) & ~presses.unseen
         if unknown.all():
@@ -182,28 +243,40 @@ def compare_log(document, report, log, source, *, tare="no-load", drift=None, sa
     times = np.asarray(log.times, dtype=np.float64)
     travel = np.asarray(log.columns[law["indentation"]], dtype=np.float64)
     mask = ~find_clipped(observed, upper_limit(log, source, saturation_pa)) & ~find_kinks(times, travel)[:, None]
-    mask[presses.select(~keep | presses.unseen).press_of_samples(log.num_samples) >= 0] = False
+    for start, end in zip(presses.starts[~keep | presses.unseen], presses.ends[~keep | presses.unseen]):
+        mask[start:end] = False
     kept = presses.select(keep)
-    press = kept.press_of_samples(log.num_samples)
-    data = make_press_data(times - times[0], travel, press, site_ids, np.zeros(observed.shape), np.ones(observed.shape), np.zeros((len(times), 1)), len(sites))
-    depths = calc_depths(data, jnp.asarray(onsets), lag)
-    bases = np.asarray(calc_bases(_law_prony(document), depths, data))  # (T, S, J)
-    amplitudes = np.array([[site["amplitudes_Pa"][name] for site in sites] for name in channels], dtype=np.float64)  # (C, S, J)
-    elastic = np.asarray(calc_elastic(bases, depths > 0.0, amplitudes))
+    noise = np.array([estimate_noise(observed[mask[:, c], c : c + 1])[0] for c in range(len(channels))])
+    data = make_press_data(times - times[0], travel, kept.press_of_samples(log.num_samples), site_ids, np.zeros(observed.shape), np.ones(observed.shape), np.zeros((len(times), 1)), len(sites))
+    model = _make_law_model(document, data, onsets, site_ids, lag)
+    amplitudes = jnp.asarray([[site["amplitudes_Pa"][name] for site in sites] for name in channels], dtype=jnp.float64)  # (C, S, J)
+    basis = drift_basis(times, drift if drift is not None else DRIFT_KNOT_S)
+    shift, shift_var = 0.0, 0.0
+    if home == "estimate" and own is None:
+        shift, shift_var = _estimate_home(model, amplitudes, basis, observed, mask, noise)
+        if abs(shift) > 0.99 * ONSET_HALF_RANGE:
+            say(f"{source}: its home shift is at its bound (±{ONSET_HALF_RANGE * 1e3:g} mm of the fit's onsets): is it a log of this sensor and stage?")
+    elastic, bases, touching, by_q, by_shift = (np.asarray(a) for a in _predict(model, amplitudes, jnp.asarray(shift)))
     if isinstance(tare, tuple):
         first = times - times[0] <= tare[1]
-        baseline = np.broadcast_to(np.mean(np.where(mask & first[:, None], observed, np.nan), axis=0)[None, :], observed.shape)
         if first.sum() < 1:
             raise HydrotactError(f"{source}: no samples in the first {tare[1]:g} s to tare on")
+        used = mask & first[:, None]
+        baseline = np.broadcast_to(np.mean(np.where(used, observed, np.nan), axis=0)[None, :], observed.shape)
+        tare_basis = np.ones((len(times), 1))
     else:
-        basis = drift_basis(times, drift if drift is not None else DRIFT_KNOT_S)
         used = mask if tare == "all" else mask & (elastic == 0.0)
         baseline = basis @ _solve_baseline(basis, observed, elastic, used)
+        tare_basis = basis
     predicted = baseline + elastic
+    band = _tare_variance(tare_basis, used, noise)
+    if covariance is not None:
+        band = band + _parameter_variance(by_q, by_shift, shift_var, covariance, bases, touching, elastic, basis if tare == "all" else None, mask)
     hold = np.full(len(times), -1)
     for p, (start, end) in enumerate(zip(kept.starts, kept.ends)):
         deepest = travel[start:end].max()
         hold[start:end][travel[start:end] >= deepest - HOLD_TOLERANCE] = p
+    predicted_std = np.sqrt(band) if covariance is not None else np.full(observed.shape, np.nan)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # a channel clipped through a whole hold: NaN there, None in JSON
         error = np.where(mask, observed - predicted, np.nan)
@@ -216,17 +289,137 @@ def compare_log(document, report, log, source, *, tare="no-load", drift=None, sa
             if rows.sum() > 1:
                 shaped[rows] = error[rows] - np.nanmean(error[rows], axis=0)
         hold_shape = np.sqrt(np.nanmean(shaped**2, axis=0))
+        prediction_std = np.sqrt(np.nanmean(np.where(mask, predicted_std**2, np.nan), axis=0))
+        normalized = np.sqrt(np.nanmean(error**2 / (noise**2 + np.where(np.isfinite(predicted_std), predicted_std, 0.0) ** 2), axis=0))
+    estimated = home == "estimate" and own is None
     return Comparison(
         source=source, channels=channels, times=times, observed=observed, predicted=predicted, mask=mask, hold=hold, rms_pa=rms, r2=r2,
-        hold_shape_rms_pa=hold_shape, noise_pa=np.array([estimate_noise(observed[mask[:, c], c : c + 1])[0] for c in range(len(channels))]),
+        hold_shape_rms_pa=hold_shape, noise_pa=noise, predicted_std=predicted_std, prediction_std_pa=prediction_std, normalized_rms=normalized,
+        home_shift_m=float(shift) if estimated else None, home_shift_std_m=float(np.sqrt(shift_var)) if estimated else None,
     )
 
 
-def compare_fit(fit_dir, paths, output, *, mapping=None, tare="no-load", report_warning=None, plot=None) -> dict:
+class _LawModel(eqx.Module):
+    """A log's elastic part as a function of the law's parameters q (log Eᵢ/E∞, log
+    τᵢ, the sites' onsets, the lag: the order of the fit's covariance), the
+    amplitudes (C, S, J) and a shift of every onset (the home's). Build it with
+    :func:`_make_law_model`."""
+
+    data: PressData
+    q: jax.Array
+    press_onsets: jax.Array
+    site_ids: jax.Array
+    long_term: float = eqx.field(static=True)
+    num_terms: int = eqx.field(static=True)
+
+    def elastic(self, q, amplitudes, shift, with_bases=False):
+        k, num_sites = self.num_terms, self.data.num_sites
+        shape = Prony(jnp.asarray(self.long_term), self.long_term * jnp.exp(q[:k]), jnp.exp(q[k : 2 * k]))
+        # A fitted log's own onsets (or the sites'), moved as q moves its sites' onsets.
+        onsets = self.press_onsets + (q[2 * k : 2 * k + num_sites] - self.q[2 * k : 2 * k + num_sites])[self.site_ids] + shift
+        depths = calc_depths(self.data, onsets, q[-1])
+        bases = calc_bases(shape, depths, self.data)
+        elastic = calc_elastic(bases, depths > 0.0, amplitudes)
+        return (elastic, bases, depths > 0.0) if with_bases else elastic
+
+
+def _make_law_model(document, data, press_onsets, site_ids, lag) -> _LawModel:
+    prony = _law_prony(document)
+    long_term = float(prony.long_term_modulus)
+    site_onsets = jnp.asarray([site["onset_m"] for site in document["channel_law"]["sites"]], dtype=jnp.float64)
+    q = jnp.concatenate([jnp.log(prony.moduli / long_term), jnp.log(prony.taus), site_onsets, jnp.asarray([lag], dtype=jnp.float64)])
+    return _LawModel(data, q, jnp.asarray(press_onsets, dtype=jnp.float64), jnp.asarray(site_ids), long_term, len(prony.taus))
+
+
+@eqx.filter_jit
+def _predict(model, amplitudes, shift):
+    """At the fit's q: the elastic part (T, C), the bases (T, S, J), the contact (T,),
+    and the derivatives of the elastic part in q (T, C, Q) and in the shift (T, C)."""
+    elastic, bases, touching = model.elastic(model.q, amplitudes, shift, with_bases=True)
+    by_q = jax.jacfwd(lambda q: model.elastic(q, amplitudes, shift))(model.q)
+    by_shift = jax.jacfwd(lambda h: model.elastic(model.q, amplitudes, h))(shift)
+    return elastic, bases, touching, by_q, by_shift
+
+
+def _home_residuals(shift, args):
+    """The log's weighted residuals for a shift of its onsets, each channel's
+    baseline solved with it."""
+    model, amplitudes, basis, observed, used, weights = args
+    elastic = model.elastic(model.q, amplitudes, shift)
+    coefficients = solve_baselines(basis, observed - elastic, used)
+    return ((observed - elastic - basis @ coefficients.T) * weights).reshape(-1)
+
+
+@eqx.filter_jit
+def _fit_home(args):
+    """(shift, χ², Jᵀ J): the best of HOME_GRID shifts within ±ONSET_HALF_RANGE,
+    polished by Levenberg-Marquardt (the shift = ONSET_HALF_RANGE tanh(u), as the
+    fit's onsets)."""
+    grid = jnp.linspace(-0.98, 0.98, HOME_GRID) * ONSET_HALF_RANGE
+    values = jax.lax.map(lambda shift: jnp.sum(_home_residuals(shift, args) ** 2), grid)
+    start = jnp.arctanh(grid[jnp.argmin(values)] / ONSET_HALF_RANGE)
+
+    def residuals(u, args):
+        return _home_residuals(ONSET_HALF_RANGE * jnp.tanh(u), args)
+
+    solution = solve_least_squares(residuals, start, args, make_solver("lm"), max_steps=50, throw=False)
+    shift = ONSET_HALF_RANGE * jnp.tanh(solution.value)
+    derivative = jax.jacfwd(_home_residuals)(shift, args)
+    return shift, jnp.sum(_home_residuals(shift, args) ** 2), derivative @ derivative
+
+
+def _estimate_home(model, amplitudes, basis, observed, mask, noise):
+    """(shift, its variance): the shift of every onset that best fits the log (see
+    :func:`_fit_home`). The variance is Gauss-Newton's, scaled by the reduced χ²
+    where it exceeds 1, given the fit (the fit's own errors are in the band, not
+    here)."""
+    weights = jnp.where(jnp.asarray(mask), 1.0 / jnp.asarray(noise)[None, :], 0.0)
+    shift, chi_square, curvature = _fit_home((model, amplitudes, jnp.asarray(basis), jnp.asarray(observed), jnp.asarray(mask), weights))
+    dof = max(int(mask.sum()) - basis.shape[1] * observed.shape[1] - 1, 1)
+    return float(shift), max(float(chi_square) / dof, 1.0) / max(float(curvature), 1e-300)
+
+
+def _tare_variance(basis, used, noise):
+    """(T, C) the variance the tare's noise adds to each sample's prediction: the
+    baseline's least squares over the `used` samples (T, C) of each channel."""
+    variance = np.zeros(used.shape)
+    for c in range(used.shape[1]):
+        rows = basis[used[:, c]]
+        if len(rows):
+            inverse = np.linalg.pinv(rows.T @ rows)
+            variance[:, c] = noise[c] ** 2 * np.einsum("td,de,te->t", basis, inverse, basis)
+    return variance
+
+
+def _parameter_variance(dq, dh, shift_var, covariance, bases, touching, elastic, all_basis, mask):
+    """(T, C) the variance the fit's parameters (q and the amplitudes, jointly) and
+    the home shift add to each sample's prediction, to first order (`dq` (T, C, Q)
+    and `dh` (T, C) the elastic part's derivatives in q and the shift). With the
+    tare fitted to all samples (`all_basis`), the baseline absorbs part of any
+    change."""
+    num_samples, num_channels, _ = dq.shape
+    active = touching[:, None] & (elastic > 0.0)  # (T, C): where the push is on
+    columns = bases.reshape(num_samples, -1)  # (T, S J)
+    variance = np.zeros((num_samples, num_channels))
+    for c in range(num_channels):
+        jac = np.concatenate([dq[:, c, :], columns * active[:, c, None], dh[:, c, None]], axis=1)
+        if all_basis is not None:
+            used = mask[:, c]
+            jac = jac - all_basis @ np.linalg.lstsq(all_basis[used], jac[used], rcond=None)[0]
+        qa = covariance["qa"][c]
+        joint = np.block([[covariance["qq"], qa], [qa.T, covariance["aa"][c]]])
+        joint = np.block([[joint, np.zeros((len(joint), 1))], [np.zeros((1, len(joint))), np.full((1, 1), shift_var)]])
+        variance[:, c] = np.einsum("tp,pr,tr->t", jac, joint, jac)
+    return np.maximum(variance, 0.0)
+
+
+def compare_fit(fit_dir, paths, output, *, mapping=None, tare="no-load", home="estimate", report_warning=None, plot=None) -> dict:
     """Compare held-out logs with a lumped fit's prediction and write, into
-    `output`: `compare.json` (per log and channel: RMS, R², hold-shape RMS, noise),
+    `output`: `compare.json` (per log: the home shift; per channel: RMS, R²,
+    hold-shape RMS, noise, the band's RMS and the normalized RMS),
     `NAME_predicted.parquet` per log (time, each channel, and its prediction as
-    `<channel>_predicted`, 0/1 `<channel>_compared`), and with `plot(comparisons,
+    `<channel>_predicted`, its standard deviation `<channel>_predicted_std`, 0/1
+    `<channel>_compared`), and with `plot(comparisons,
     output) -> {name: path}` pictures. Everything is read and checked before
     anything is written. Returns the report (with `files`)."""
     import pyarrow as pa
@@ -240,11 +433,15 @@ def compare_fit(fit_dir, paths, output, *, mapping=None, tare="no-load", report_
     if output.exists() and not output.is_dir():
         raise HydrotactError(f"{output}: exists and is not a folder; -o names the folder compare writes into")
     tare = parse_tare(tare)
-    document, report = read_fit(fit_dir)
+    if home not in HOMES:
+        raise HydrotactError(f"--home: expected one of {', '.join(HOMES)}, got {home!r}")
+    document, report, covariance = read_fit(fit_dir)
+    if covariance is None and report_warning is not None:
+        report_warning(f"{fit_dir}: its material.json names no covariance of the channel law (a fit written before the prediction band): no band; refit for one")
     logs = read_logs([Path(p) for p in paths], mapping, None, report_warning, require_sensor=False)
     drift = (report or {}).get("drift")
     with jax.enable_x64(True):
-        comparisons = [compare_log(document, report, log, str(path), tare=tare, drift=drift, report_message=report_warning) for log, path in zip(logs, paths)]
+        comparisons = [compare_log(document, report, log, str(path), tare=tare, home=home, covariance=covariance, drift=drift, report_message=report_warning) for log, path in zip(logs, paths)]
     output.mkdir(parents=True, exist_ok=True)
     files = {}
     for comparison, path in zip(comparisons, paths):
@@ -252,6 +449,7 @@ def compare_fit(fit_dir, paths, output, *, mapping=None, tare="no-load", report_
         for c, name in enumerate(comparison.channels):
             columns[name] = comparison.observed[:, c]
             columns[f"{name}_predicted"] = comparison.predicted[:, c]
+            columns[f"{name}_predicted_std"] = comparison.predicted_std[:, c]
             columns[f"{name}_compared"] = comparison.mask[:, c].astype(np.int8)
         target = output / f"{Path(path).stem}_predicted.parquet"
         with atomic_path(target) as tmp:
@@ -259,7 +457,8 @@ def compare_fit(fit_dir, paths, output, *, mapping=None, tare="no-load", report_
         files[f"{Path(path).stem}_predicted"] = str(target)
     if plot is not None:
         files.update(plot(comparisons, output))
-    result = {"generator": f"hydrotact {__version__}", "fit": str(fit_dir), "tare": tare if isinstance(tare, str) else f"first:{tare[1]:g}", "logs": [c.to_json() for c in comparisons]}
+    result = {"generator": f"hydrotact {__version__}", "fit": str(fit_dir), "tare": tare if isinstance(tare, str) else f"first:{tare[1]:g}", "home": home,
+        "prediction_band": BAND_NOTE if covariance is not None else None, "logs": [c.to_json() for c in comparisons]}
     files["report"] = str(output / "compare.json")
     result["files"] = files
     write_text_atomic(files["report"], json.dumps(result, indent=2) + "\n")

@@ -196,8 +196,8 @@ def calc_press_residuals(shape: Prony, onsets, lags, datas):
 
 def calc_press_jacobian(layout: "PressLayout", x, args, linear: bool = False):
     """The flat weighted residuals (R,) and their Jacobian (R, M) in x, by hand
-    (with `linear`, also the amplitudes (C, S, J) and per log the bases (T, S, J)
-    and the contact (T,)).
+    (with `linear`, also the amplitudes (C, S, J), per log the bases (T, S, J)
+    and the contact (T,), and the amplitudes' :class:`LinearSensitivity`).
 
     Variable projection's derivative (Golub and Pereyra) per direction k:
     v = −dΦ a on the active samples, da = N⁻¹ (Φᵀ v + dΦᵀ r), dr = v − Φ da (exact for
@@ -253,7 +253,28 @@ def calc_press_jacobian(layout: "PressLayout", x, args, linear: bool = False):
         fitted = jnp.einsum("ctd,mcd->mct", drift, step[:, :, first[log] : first[log] + sizes[log]]) + jnp.einsum("cts,mcs->mct", sites, step[:, :, num_baseline:])
         columns.append(jnp.transpose(vector - fitted, (2, 1, 0)).reshape(-1, size))
     value, jacobian = jnp.concatenate([r.reshape(-1) for r in residuals]), jnp.concatenate(columns, axis=0)
-    return (value, jacobian, amplitudes, bases, [piece[2] for piece in pieces]) if linear else (value, jacobian)
+    if not linear:
+        return value, jacobian
+    # For the amplitudes' covariance: where each (channel, site, power) is fitted, its
+    # derivative in x and its block of N⁻¹ (0 where the law is fixed at 0 or no sample reaches it).
+    fitted_columns = _responding_columns(datas[0], num_powers) * (sum(jnp.einsum("cts,cts->cs", sites, sites) for _, sites, _ in weighted) > 0.0)
+    size_linear = num_baseline + num_sites * num_powers
+    identity = jnp.broadcast_to(jnp.eye(size_linear)[:, None, :], (size_linear, num_channels, size_linear))
+    inverse = jax.vmap(_apply_inverse, in_axes=(None, None, 0))(factors, scale, identity[num_baseline:])  # (S J, C, N)
+    amplitude_inverse = jnp.transpose(inverse[:, :, num_baseline:], (1, 0, 2)) * fitted_columns[:, :, None] * fitted_columns[:, None, :]
+    sensitivity = LinearSensitivity(step[:, :, num_baseline:] * fitted_columns[None], amplitude_inverse)
+    return value, jacobian, amplitudes, bases, [piece[2] for piece in pieces], sensitivity
+
+
+class LinearSensitivity(eqx.Module):
+    """What the amplitudes' covariance needs from the projection: `steps` (M, C, S J)
+    the amplitudes' derivatives in x, `inverse` (C, S J, S J) their block of the
+    (weighted) normal matrix' inverse, Pa². With Cₓ the covariance of x, the
+    amplitudes' is N⁻¹ + G Cₓ Gᵀ and their covariance with x is G Cₓ (the Schur
+    complement of the full problem's normal matrix; G = steps)."""
+
+    steps: jax.Array
+    inverse: jax.Array
 
 
 def calc_elastic(bases, touching, amplitudes):

@@ -85,7 +85,9 @@ class PressFit:
     where the push max(0, ·) is on from a pass before; the two differ by where the
     push starts or ends at the final amplitudes), `dof`, `converged`, `num_steps`,
     `solver`, `drift`, `warnings` [str]; `num_terms`; `num_starts` the shape starts
-    the fit was tried from (see SHAPE_STARTS).
+    the fit was tried from (see SHAPE_STARTS); `law_covariance` the covariance of
+    the channel law's parameters (see :func:`_law_covariance`), for `compare`'s
+    prediction band.
     """
 
     ratios: list
@@ -114,6 +116,7 @@ class PressFit:
     indentation: str
     estimate_lag: bool
     num_starts: int = 1
+    law_covariance: dict | None = None
 
     @property
     def reduced_chi_square(self) -> float:
@@ -210,7 +213,7 @@ def _press_outputs(layout, x, args):
     free; so the amplitudes are those of the projection or of up to POLISH_PASSES
     further passes (each solved where the one before pushes), whichever gives each
     channel the lowest own χ²."""
-    _, jacobian, amplitudes, bases, contact = calc_press_jacobian(layout, x, args, linear=True)
+    _, jacobian, amplitudes, bases, contact, sensitivity = calc_press_jacobian(layout, x, args, linear=True)
     datas = args[0]
     best = (amplitudes, *_own_residuals(datas, bases, contact, amplitudes))
     touching = [jnp.broadcast_to(c[:, None], data.observed.shape) for c, data in zip(contact, datas)]
@@ -225,7 +228,7 @@ def _press_outputs(layout, x, args):
             [jnp.where(better[:, None], b, old) for b, old in zip(baselines, best[2])],
         )
     amplitudes, residuals, baselines = best
-    return (residuals, baselines, amplitudes), jacobian
+    return (residuals, baselines, amplitudes), jacobian, sensitivity
 
 
 def _fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps, starts, num_used, num_linear):
@@ -322,7 +325,7 @@ def _summarise(
 ) -> PressFit:
     x = solution.value
     chi_square, solver_chi_square = chi_squares
-    (residuals, baselines, amplitudes), jacobian = outputs
+    (residuals, baselines, amplitudes), jacobian, sensitivity = outputs
     jacobian = np.asarray(jacobian)
     dof = max(num_used - layout.size - num_linear, 1)
     scale = max(chi_square / dof, 1.0)
@@ -372,6 +375,7 @@ def _summarise(
     renumber = np.cumsum(seen) - 1
     logs = [dataclasses.replace(log, press_site=renumber[log.press_site]) for log in logs]
     sites, site_onsets, amplitudes = sites[seen], site_onsets[seen], np.asarray(amplitudes)[:, seen, :]
+    law_covariance = _law_covariance(covariance, sensitivity, scale, layout, x, logs, order, seen)
     messages = []
     converged = bool(solution.converged)
     if not converged:
@@ -392,4 +396,41 @@ def _summarise(
         solver_chi_square=solver_chi_square, dof=dof,
         converged=converged, num_steps=int(solution.num_steps), solver=solver_name(solver), drift=drift, warnings=messages, num_terms=k,
         position_columns=tuple(position_columns), indentation=indentation, estimate_lag=estimate_lag, num_starts=num_starts,
+        law_covariance=law_covariance,
     )
+
+
+def _law_covariance(covariance, sensitivity, scale, layout, x, logs, order, seen) -> dict:
+    """The covariance of what `compare` predicts with: q = (log Eᵢ/E∞, log τᵢ in τ's
+    order, each site's onset (the mean of its presses'), the lag (the mean of the
+    logs')) and each channel's amplitudes A_c (S J). From the fit's covariance of x,
+    Cₓ (scaled by the reduced χ² where it exceeds 1), q = L x to first order, and the
+    amplitudes by the projection's Schur complement (see LinearSensitivity).
+
+    **Returns:** {"qq": (Q, Q), "qa": (C, Q, S J), "aa": (C, S J, S J)} (Q = 2K + S + 1), in
+    the units of q (1 for the log shape, m, s) and Pa."""
+    k = layout.num_terms
+    num_sites = int(seen.sum())
+    transform = np.zeros((2 * k + num_sites + 1, len(x)))
+    for row, i in enumerate(order):
+        transform[row, i] = 1.0
+        transform[k + row, k + i] = 1.0
+    first = 2 * k
+    counts = np.bincount(np.concatenate([log.press_site for log in logs]), minlength=num_sites)
+    for log in logs:
+        for p, site in enumerate(log.press_site):
+            transform[2 * k + site, first + p] = ONSET_HALF_RANGE * (1 - math.tanh(x[first + p]) ** 2) / counts[site]
+        first += len(log.press_site)
+    if layout.estimate_lag:
+        for j in range(len(logs)):
+            transform[-1, first + j] = LAG_BOUND * (1 - math.tanh(x[first + j]) ** 2) / len(logs)
+    num_channels, num_linear = np.asarray(sensitivity.inverse).shape[:2]
+    num_powers = num_linear // len(seen)
+    kept = np.repeat(seen, num_powers)
+    steps = np.asarray(sensitivity.steps)[:, :, kept]  # (M, C, S J)
+    inverse = np.asarray(sensitivity.inverse)[:, kept][:, :, kept] * scale
+    return {
+        "qq": transform @ covariance @ transform.T,
+        "qa": np.einsum("qm,mn,ncs->cqs", transform, covariance, steps),
+        "aa": inverse + np.einsum("mcs,mn,nct->cst", steps, covariance, steps),
+    }

@@ -2,14 +2,19 @@
 and the channel law that `compare` predicts with), `report.json` and plots."""
 
 
+from pathlib import Path
+
 import numpy as np
 
 from .. import __version__
+from .._files import atomic_path
 from ..data import make_material_document
 from ._press_fit import PressFit
 from ._press_windows import DEPTH_SCALE, POWERS
 from ._problem import _file_digest
 from ._report import write_outputs
+
+COVARIANCE_FILE = "channel_law_covariance.npz"  # beside material.json
 
 
 def make_press_material(fit: PressFit, paths=(), name: str | None = None) -> dict:
@@ -55,6 +60,7 @@ def channel_law(fit: PressFit) -> dict:
         "powers": list(POWERS),
         "channels": list(fit.channels),
         "sites": sites,
+        **({"covariance_file": COVARIANCE_FILE} if fit.law_covariance is not None else {}),
     }
 
 
@@ -116,7 +122,15 @@ def make_press_report(fit: PressFit) -> dict:
 
 
 def write_press_fit_outputs(fit: PressFit, out_dir, paths=(), plot=None) -> dict:
-    """material.json, report.json and, with `plot(fit, out_dir) -> {name: path}`,
-    the plots in out_dir (each written atomically). Returns the report, with
-    `files`."""
-    return write_outputs(fit, out_dir, make_press_material(fit, paths), make_press_report(fit), plot)
+    """material.json, report.json, the channel law's covariance (COVARIANCE_FILE,
+    numpy's npz: `qq`, `qa`, `aa` of :func:`hydrotact.sysid._press_fit._law_covariance`,
+    which `compare` turns into a prediction band) and, with `plot(fit, out_dir) ->
+    {name: path}`, the plots in out_dir (each written atomically). Returns the
+    report, with `files`."""
+    out_dir = Path(out_dir)
+    files = {}
+    if fit.law_covariance is not None:
+        files["law_covariance"] = str(out_dir / COVARIANCE_FILE)
+        with atomic_path(files["law_covariance"]) as tmp:
+            np.savez(tmp, **fit.law_covariance)
+    return write_outputs(fit, out_dir, make_press_material(fit, paths), make_press_report(fit), plot, files=files)

@@ -130,13 +130,14 @@ def write_fit_outputs(result: FitResult, out_dir, paths=(), plot=None) -> dict:
     return write_outputs(result, out_dir, make_fit_material(result, paths), make_report(result), plot)
 
 
-def write_outputs(result, out_dir, material: dict, report: dict, plot=None) -> dict:
+def write_outputs(result, out_dir, material: dict, report: dict, plot=None, files=None) -> dict:
     """Write a fit's `material` document and, with `plot(result, out_dir) -> {name:
     path}`, its pictures into out_dir, then `report` with `files` naming everything
-    written (report.json last, each file atomically). Returns the report."""
+    written (report.json last, each file atomically; `files` those the caller wrote
+    before). Returns the report."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    files = {"material": str(out_dir / "material.json"), "report": str(out_dir / "report.json")}
+    files = {**(files or {}), "material": str(out_dir / "material.json"), "report": str(out_dir / "report.json")}
     write_material(files["material"], material)
     if plot is not None:
         files.update(plot(result, out_dir))

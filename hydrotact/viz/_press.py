@@ -6,7 +6,9 @@ and named in a legend; residual histograms over their whole range.
 - `traces.png`: measured (dots) and fitted (lines) presses, per channel;
 - `residuals.png`: residuals in noise units against the time in the press, and their
   histogram against N(0, 1);
-- `relaxation.png`: the fitted E(t)/E∞ with a 95 % band from the standard errors.
+- `relaxation.png`: the fitted E(t)/E∞ with a 95 % band from the standard errors;
+- `compare_traces.png`, `compare_residuals.png`: the same for held-out logs, the
+  errors over √(noise² + the prediction band²).
 """
 
 from pathlib import Path
@@ -45,7 +47,7 @@ def _press_panels(channels, series, path, title, ylabel="elastic part [Pa]") -> 
     save_figure(figure, path)
 
 
-def _residual_panels(channels, residuals, path, title) -> None:
+def _residual_panels(channels, residuals, path, title, unit="residual / noise σ") -> None:
     """Residuals/σ against the time in the press per channel, and histograms."""
     import matplotlib.pyplot as plt
 
@@ -57,7 +59,7 @@ def _residual_panels(channels, residuals, path, title) -> None:
         left.plot(times, values, ".", ms=1.0, alpha=0.4, color=_colour(c), label=name)
         everything.append(values)
     left.set_xlabel("time from the press's start [s]")
-    left.set_ylabel("residual / noise σ")
+    left.set_ylabel(unit)
     left.set_title(title, fontsize=9)
     left.legend(fontsize=7, markerscale=6, ncol=2)
     values = np.concatenate(everything) if everything else np.zeros(0)
@@ -73,7 +75,7 @@ def _residual_panels(channels, residuals, path, title) -> None:
         right.plot(grid, np.exp(-0.5 * grid**2) / np.sqrt(2 * np.pi), "k--", lw=1.0, label="N(0, 1)")
         right.set_yscale("log")
         right.set_ylim(bottom=1e-5)
-        right.set_xlabel("residual / noise σ")
+        right.set_xlabel(unit)
         right.legend(fontsize=7)
     figure.tight_layout()
     save_figure(figure, path)
@@ -156,7 +158,9 @@ def plot_comparisons(comparisons, out_dir) -> dict:
                 used = comparison.mask[rows, c]
                 base = comparison.predicted[rows[0], c]
                 series[c].append((t[used], comparison.observed[rows, c][used] - base, comparison.predicted[rows, c][used] - base))
-                residuals[c].append((t[used], ((comparison.observed - comparison.predicted)[rows, c] / comparison.noise_pa[c])[used]))
+                band = np.nan_to_num(comparison.predicted_std[rows, c])  # NaN: a fit without its covariance
+                scale = np.sqrt(comparison.noise_pa[c] ** 2 + band**2)
+                residuals[c].append((t[used], ((comparison.observed - comparison.predicted)[rows, c] / scale)[used]))
     _press_panels(channels, series, paths["traces_png"], f"{len(comparisons)} held-out log(s): measured and predicted", ylabel="reading − baseline [Pa]")
-    _residual_panels(channels, residuals, paths["residuals_png"], "prediction errors")
+    _residual_panels(channels, residuals, paths["residuals_png"], "prediction errors", unit="error / √(noise² + band²)")
     return {name: str(path) for name, path in paths.items()}
