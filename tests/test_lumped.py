@@ -149,3 +149,24 @@ def test_the_hand_jacobian_is_autodiffs_through_the_projection():
     # product with it; jit's fusions differ only in round-off).
     carried = jax.jit(jax.jacfwd(press_residual_fn(layout)))(x, args)
     np.testing.assert_array_less(np.abs(np.asarray(carried - jacobian)).max(axis=0), 1e-6 * scale)
+    # What the amplitudes' covariance is built from: their derivatives in x (against
+    # forward mode through the projection), and their block of N⁻¹, which is the
+    # covariance of amplitudes solved from readings with the weights' noise: Σ_t
+    # (∂A/∂y_t)(∂A/∂y_t)ᵀ / w_t² (reverse mode in the readings).
+    sensitivity = jax.jit(lambda x: calc_press_jacobian(layout, x, args, linear=True)[-1])(x)
+    steps = np.moveaxis(np.asarray(jax.jacfwd(amplitudes)(x)), -1, 0).reshape(np.asarray(sensitivity.steps).shape)
+    np.testing.assert_allclose(np.asarray(sensitivity.steps), steps, atol=1e-3 * np.abs(steps).max())
+
+    def from_readings(observed):
+        changed = tuple(eqx.tree_at(lambda data: data.observed, data, y) for data, y in zip(datas, observed))
+        return calc_press_residuals(*layout.unpack(x, starts, (0.0, 0.0)), changed)[2]
+
+    by_reading = jax.jit(jax.jacrev(from_readings))(tuple(data.observed for data in datas))  # per log (C, S, J, T, C)
+    for c in range(len(responds)):
+        block = sum(
+            np.einsum("st,t,rt->sr", np.asarray(d)[c, ..., c].reshape(12, -1), 1.0 / np.asarray(data.weights)[:, c] ** 2, np.asarray(d)[c, ..., c].reshape(12, -1))
+            for d, data in zip(by_reading, datas)
+        )
+        # to 1e-4 (the nearly collinear powers: N is ill-conditioned); a wrong block would be off by O(1)
+        np.testing.assert_allclose(np.asarray(sensitivity.inverse)[c], block, rtol=1e-3, atol=1e-6 * np.abs(block).max())
+    assert np.all(np.asarray(sensitivity.inverse)[0, 4:8] == 0.0)  # channel 0's law at site 1 is fixed at 0
