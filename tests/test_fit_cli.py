@@ -26,6 +26,7 @@ LUMPED_TRUTH = {"long_term_modulus": 6e5, "moduli": [2.5e5, 1.5e5], "taus": [0.5
 AMPLITUDES = np.array([800.0, 1500.0, 400.0, 1000.0])  # Pa at the deepest indentation
 EXPONENTS = np.array([1.5, 2.0, 1.7, 2.2])  # Hertz and steeper: the lumped law sums powers 1.5-3
 FIT_FILES = ["material.json", "relaxation.png", "report.json", "residuals.png", "traces.png"]
+LUMPED_FILES = sorted([*FIT_FILES, "channel_law_covariance.npz"])  # the channel law's covariance, for compare's band
 PNG = b"\x89PNG\r\n\x1a\n"
 
 
@@ -58,7 +59,7 @@ def _relative_taus(report):
 
 
 def _check_lumped_outputs(folder, report):
-    assert sorted(p.name for p in folder.iterdir()) == FIT_FILES, "missing outputs or temporaries left behind"
+    assert sorted(p.name for p in folder.iterdir()) == LUMPED_FILES, "missing outputs or temporaries left behind"
     material = read_material(folder / "material.json")
     assert material["modulus_scale"] == "relative"
     assert material["long_term_modulus_Pa"]["value"] == 1.0
@@ -90,7 +91,7 @@ def test_lumped_fit_of_a_parquet_log(tmp_path, capsys, lumped_parquet):
     for term in report["prony_terms"]:
         assert f"{term['tau_s']['value']:.6g}" in out, out
     assert f"hydrotact fit: results in {output}/" in out
-    for name in FIT_FILES:
+    for name in LUMPED_FILES:
         assert str(output / name) in out
 
 
@@ -151,7 +152,7 @@ def test_jittery_log_warns_and_fits(tmp_path, capsys, lumped_log):
     assert any("jittery.parquet" in line and "uneven sampling" in line for line in lines), err
     assert "Traceback" not in err
     json.loads(out)
-    assert sorted(p.name for p in output.iterdir()) == FIT_FILES
+    assert sorted(p.name for p in output.iterdir()) == LUMPED_FILES
 
 
 def test_lumped_fit_follows_a_drifting_baseline(tmp_path, capsys, lumped_log):
