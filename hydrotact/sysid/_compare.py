@@ -21,8 +21,8 @@ baseline, the *tare*, which comes from the log itself:
 The stage's *home* (the travel column's zero) differs between sessions: a held-out
 log's contact onsets are the fit's per-site onsets shifted by one unknown amount.
 With home="estimate" (the default) that shift is fitted to the log (one number: the
-least squares over a grid of ±ONSET_HALF_RANGE, then Brent's method, each channel's
-baseline solved with it); with home="fit" the fit's onsets are used as they are.
+least squares over a grid of ±ONSET_HALF_RANGE, then Levenberg-Marquardt, each
+channel's baseline solved with it); with home="fit" the fit's onsets are used as they are.
 
 The prediction comes with a band, each sample's standard deviation from what is not
 known exactly: the fit's parameters (the relaxation shape, the sites' onsets, the lag
@@ -243,8 +243,7 @@ def compare_log(document, report, log, source, *, tare="no-load", home="estimate
     times = np.asarray(log.times, dtype=np.float64)
     travel = np.asarray(log.columns[law["indentation"]], dtype=np.float64)
     mask = ~find_clipped(observed, upper_limit(log, source, saturation_pa)) & ~find_kinks(times, travel)[:, None]
-    for start, end in zip(presses.starts[~keep | presses.unseen], presses.ends[~keep | presses.unseen]):
-        mask[start:end] = False
+    mask[presses.select(~keep | presses.unseen).press_of_samples(log.num_samples) >= 0] = False
     kept = presses.select(keep)
     noise = np.array([estimate_noise(observed[mask[:, c], c : c + 1])[0] for c in range(len(channels))])
     data = make_press_data(times - times[0], travel, kept.press_of_samples(log.num_samples), site_ids, np.zeros(observed.shape), np.ones(observed.shape), np.zeros((len(times), 1)), len(sites))
@@ -252,7 +251,8 @@ def compare_log(document, report, log, source, *, tare="no-load", home="estimate
     amplitudes = jnp.asarray([[site["amplitudes_Pa"][name] for site in sites] for name in channels], dtype=jnp.float64)  # (C, S, J)
     basis = drift_basis(times, drift if drift is not None else DRIFT_KNOT_S)
     shift, shift_var = 0.0, 0.0
-    if home == "estimate" and own is None:
+    estimated = home == "estimate" and own is None
+    if estimated:
         shift, shift_var = _estimate_home(model, amplitudes, basis, observed, mask, noise)
         if abs(shift) > 0.99 * ONSET_HALF_RANGE:
             say(f"{source}: its home shift is at its bound (±{ONSET_HALF_RANGE * 1e3:g} mm of the fit's onsets): is it a log of this sensor and stage?")
@@ -291,7 +291,6 @@ def compare_log(document, report, log, source, *, tare="no-load", home="estimate
         hold_shape = np.sqrt(np.nanmean(shaped**2, axis=0))
         prediction_std = np.sqrt(np.nanmean(np.where(mask, predicted_std**2, np.nan), axis=0))
         normalized = np.sqrt(np.nanmean(error**2 / (noise**2 + np.where(np.isfinite(predicted_std), predicted_std, 0.0) ** 2), axis=0))
-    estimated = home == "estimate" and own is None
     return Comparison(
         source=source, channels=channels, times=times, observed=observed, predicted=predicted, mask=mask, hold=hold, rms_pa=rms, r2=r2,
         hold_shape_rms_pa=hold_shape, noise_pa=noise, predicted_std=predicted_std, prediction_std_pa=prediction_std, normalized_rms=normalized,
