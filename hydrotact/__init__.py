@@ -19,5 +19,6 @@ command; no stage imports either. Units are SI throughout (m, Pa, N, s, rad).
 """
 
 from ._errors import HydrotactError as HydrotactError
+from ._errors import HydrotactWarning as HydrotactWarning
 
 __version__ = "0.1.0"

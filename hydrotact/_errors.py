@@ -11,6 +11,11 @@ class HydrotactError(ValueError):
     """A problem with the user's input, with a message that says where it is."""
 
 
+class HydrotactWarning(UserWarning):
+    """Input that is accepted but may mislead (a clipped reading, uneven sampling), with
+    the figures. The command line prints it as one `hydrotact: warning: ...` line."""
+
+
 def where(source: str | None) -> str:
     """Prefix for a message about `source` (a file name or a description), or ''."""
     return f"{source}: " if source else ""

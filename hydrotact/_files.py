@@ -6,6 +6,8 @@ import os
 import tempfile
 from pathlib import Path
 
+from ._errors import HydrotactError
+
 
 @contextlib.contextmanager
 def atomic_path(path, suffix: str | None = None):
@@ -27,6 +29,42 @@ def atomic_path(path, suffix: str | None = None):
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)
+
+
+def check_output(path, *, directory: bool = False, suffixes: tuple[str, ...] = (), what: str = "") -> Path:
+    """Refuse, before any work, an output that could not be written: a file whose path
+    is a folder (or a folder that is a file), a path under a file, a folder nobody may
+    write in, a name without one of `suffixes`. Writes nothing but a probe file that
+    is removed at once (the only sure test of a folder, e.g. under /proc).
+
+    **Arguments:**
+
+    - `path`: the file (or, with `directory`, the folder) a job will write.
+    - `suffixes`: the suffixes allowed (lower case, with the dot), or () for any.
+    - `what`: what the file is (`the log`, `the plot`), for the message.
+
+    **Returns:** `path` as a Path. **Raises:** :class:`HydrotactError` naming it.
+    """
+    path = Path(path)
+    what = f"{what} " if what else ""
+    if suffixes and path.suffix.lower() not in suffixes:
+        names = " or ".join(f"*{suffix}" for suffix in suffixes)
+        raise HydrotactError(f"{path}: {what}is written as {names}; name it so")
+    if path.exists() and path.is_dir() != directory:
+        kind = "a folder, not a file" if path.is_dir() else "a file, not a folder"
+        raise HydrotactError(f"{path}: is {kind}; {what}needs {'a folder' if directory else 'a file name'} here")
+    folder = path if directory else path.parent
+    existing = folder
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir():
+        raise HydrotactError(f"{path}: {existing} is a file, not a folder")
+    try:
+        with tempfile.TemporaryFile(dir=existing):
+            pass
+    except OSError as error:
+        raise HydrotactError(f"{path}: cannot write in {existing}/ ({error.strerror or error})") from None
+    return path
 
 
 def write_text_atomic(path, text: str) -> None:

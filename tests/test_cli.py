@@ -35,7 +35,7 @@ def test_mesh_command_on_a_surface_file_in_millimetres(tmp_path):
     path = tmp_path / "block.stl"
     surface = box_surface((6.0, 6.0, 3.0))  # millimetres
     surface.export(path)
-    result = run_cli("mesh", path, "--units", "mm", "--edge-length", "1e-3", "--json")
+    result = run_cli("mesh", path, "--units", "mm", "--edge-length", "1", "--json")  # --edge-length in --units too
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)
     np.testing.assert_allclose(report["volume_m3"], 108e-9, rtol=1e-3)
@@ -105,4 +105,4 @@ def test_contact_command_errors():
     assert_one_line_error(run_cli("contact", "--sensor", "pad5x5", "--probe", "cone:h=1", "--at", "0,0,1mm"), "--probe", "unknown probe")
     assert_one_line_error(run_cli("contact", "--sensor", "pad5x5", "--probe", "plane", "--at", "0,0"), "--at", "X,Y,DEPTH")
     assert_one_line_error(run_cli("contact", "--sensor", "pad5x5", "--probe", "plane", "--at", "20mm,0,1mm"), "no part of the sensor lies under")
-    assert_one_line_error(run_cli("contact", "--sensor", "pad5x5", "--probe", "cylinder:d=-2mm", "--at", "0,0,1mm"), "diameter must be a positive length")
+    assert_one_line_error(run_cli("contact", "--sensor", "pad5x5", "--probe", "cylinder:d=-2mm", "--at", "0,0,1mm"), "--probe d", "must be positive")

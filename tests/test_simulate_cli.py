@@ -346,3 +346,40 @@ def test_partial_file_of_another_block_size_is_used_correctly(tmp_path, monkeypa
     resumed = _Counting()
     _run(trajectory, output, monkeypatch, resumed)
     _assert_same_log(read_log(output), reference)
+
+
+def test_interrupted_fit_of_many_logs_resumes(tmp_path, monkeypatch):
+    """A full fit of three logs interrupted inside the second log's unit responses
+    resumes there: the first log's come from the cache, the second's finished blocks
+    from its partial file beside the cache entry; the fit equals an uninterrupted one."""
+    from hydrotact.sysid import fit_logs
+
+    paths = []
+    for k, shift in enumerate((0.0, 1.1e-3, -1.1e-3)):
+        rows = _in_metres(TRAJECTORY_MM)
+        rows[:, 1] += shift
+        paths.append(tmp_path / f"log{k}.parquet")
+        job.run_simulate("pad5x5", PROBE, _write_trajectory(tmp_path / f"traj{k}.csv", rows.tolist()), paths[-1], modulus=1e6, num_rays=RAYS, progress=False)
+    blocks_per_log = len(TRAJECTORY_MM) // BLOCK_SAMPLES
+
+    def fit(folder, cache, counting):
+        monkeypatch.setenv("HYDROTACT_CACHE_DIR", str(tmp_path / cache))
+        monkeypatch.setattr(host, "compute_unit_responses", counting)
+        return fit_logs(paths, tmp_path / folder, terms=0, progress=False)
+
+    interrupted = _Counting(fail_on=blocks_per_log + 2)  # the first log done, one block of the second saved
+    with pytest.raises(KeyboardInterrupt):
+        fit("fit", "cache", interrupted)
+    assert not (tmp_path / "fit").exists()
+    partial = list((tmp_path / "cache" / "unit_responses").glob("*.partial.npz"))
+    assert len(partial) == 1
+    resumed = _Counting()
+    report = fit("fit", "cache", resumed)
+    assert resumed.calls == 3 * blocks_per_log - (blocks_per_log + 1), "recomputed a cached log or a saved block"
+    assert not list((tmp_path / "cache" / "unit_responses").glob("*.partial.npz"))
+
+    whole = _Counting()
+    uninterrupted = fit("fit-whole", "fresh-cache", whole)
+    assert whole.calls == 3 * blocks_per_log
+    for key in ("long_term_modulus_Pa", "gains", "offsets_Pa", "reduced_chi_square"):
+        assert json.dumps(report[key]) == json.dumps(uninterrupted[key]).replace("fit-whole", "fit"), key

@@ -9,10 +9,12 @@ value at fault, and exit status 2; never a traceback.
 """
 
 import argparse
+import re
 import sys
+import warnings
 
 from .. import __version__
-from .._errors import HydrotactError
+from .._errors import HydrotactError, HydrotactWarning
 from . import compare, contact, demo, field, fit, mesh, simulate
 
 COMMANDS = (mesh, field, contact, simulate, fit, compare, demo)
@@ -24,8 +26,26 @@ COMMANDS = (mesh, field, contact, simulate, fit, compare, demo)
 FUTURE_COMMANDS = ("generate", "train", "evaluate", "predict", "export", "design")
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse, with one-line usage errors and negative numbers as values.
+
+    A usage error is one line, `hydrotact: error: COMMAND: ...`, pointing to the
+    command's --help (argparse prints the whole usage first). A value such as `-1e5`
+    or `-1mm,0,0.4mm` is a value, not an unknown option (argparse takes only `-5` and
+    `-0.5` so), so that `--modulus -1e5` is refused for its sign, not as a missing
+    argument. (Subcommands' parsers are of this class too.)"""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-\.?\d")
+
+    def error(self, message):
+        command = self.prog.partition(" ")[2]
+        self.exit(2, f"hydrotact: error: {command + ': ' if command else ''}{message}; see '{self.prog} --help'\n")
+
+
 def make_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="hydrotact",
         description="Differentiable simulation and system identification for barometric tactile sensors.",
     )
@@ -42,9 +62,24 @@ def main(argv=None) -> int:
         import jax
 
         jax.config.update("jax_enable_x64", True)
-        args.run(args)
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", HydrotactWarning)
+            show = warnings.showwarning
+
+            def one_line(message, category, *rest, **keywords):
+                if issubclass(category, HydrotactWarning):
+                    print(f"hydrotact: warning: {message}", file=sys.stderr)
+                else:
+                    show(message, category, *rest, **keywords)
+
+            warnings.showwarning = one_line
+            args.run(args)
     except HydrotactError as error:
         print(f"hydrotact: error: {error}", file=sys.stderr)
+        return 2
+    except OSError as error:  # the file system failed under a checked path (disk full, removed folder)
+        name = error.filename if error.filename is not None else "output"
+        print(f"hydrotact: error: {name}: {error.strerror or error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("hydrotact: interrupted", file=sys.stderr)

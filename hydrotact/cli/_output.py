@@ -1,6 +1,21 @@
 """Printing reports: a two-column rich table, or JSON with --json."""
 
+import contextlib
 import json
+
+
+@contextlib.contextmanager
+def status(message: str):
+    """A spinner with `message` on stderr while a slow step runs (on a terminal; shows
+    nothing when stderr is a file or a pipe)."""
+    from rich.console import Console
+
+    console = Console(stderr=True)
+    if not console.is_terminal:
+        yield
+        return
+    with console.status(message):
+        yield
 
 
 def print_report(title: str, report: dict, as_json: bool) -> None:

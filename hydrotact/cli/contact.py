@@ -4,7 +4,7 @@ from pathlib import Path
 
 from .._defaults import DEFAULT_MODULUS
 from ._arguments import MODULUS_HELP, number
-from ._output import print_report
+from ._output import print_report, status
 
 
 def add_parser(subparsers):
@@ -22,16 +22,24 @@ def add_parser(subparsers):
 
 
 def run(args) -> None:
-    from ..contact import press_probe
-    from ..field import solve_field_report
+    from .._files import check_output
+    from ..contact import parse_at, parse_probe, press_probe
+    from ..field import check_modulus, solve_field_report
     from ..mesh import load_tet_mesh
 
+    if args.png is not None:
+        check_output(args.png, suffixes=(".png",))
+    check_modulus(args.modulus)
+    parse_probe(args.probe)  # all refused before the slow part if malformed
+    parse_at(args.at)
     source = args.sensor or args.mesh
-    mesh = load_tet_mesh(source)
-    strain, _ = solve_field_report(mesh, kind=args.field, modulus=args.modulus, source=source)
-    report, surface, probe, X_SP = press_probe(mesh, strain, args.modulus, args.probe, args.at)
+    with status(f"meshing {source} and solving its {args.field} strain field"):
+        mesh = load_tet_mesh(source)
+        strain, _ = solve_field_report(mesh, kind=args.field, modulus=args.modulus, source=source)
+    with status("pressing the probe (the first contact compiles its kernels: 10-40 s)"):
+        report, surface, probe, X_SP = press_probe(mesh, strain, args.modulus, args.probe, args.at)
+    print_report(f"contact of {args.probe} with {source}", report, args.json)
     if args.png:
         from ..viz import render_contact
 
         render_contact(mesh, surface, args.png, probe=probe, X_SP=X_SP, title=f"{source}: {args.probe} at {args.at}")
-    print_report(f"contact of {args.probe} with {source}", report, args.json)

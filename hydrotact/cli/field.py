@@ -4,7 +4,7 @@ from pathlib import Path
 
 from .._defaults import DEFAULT_MODULUS
 from ._arguments import MODULUS_HELP, add_source_arguments, number
-from ._output import print_report
+from ._output import print_report, status
 
 
 def add_parser(subparsers):
@@ -19,11 +19,18 @@ def add_parser(subparsers):
 
 
 def run(args) -> None:
-    from ..field import solve_field_report
-    from ..mesh import load_tet_mesh, write_mesh
+    from .._files import check_output
+    from ..field import check_modulus, solve_field_report
+    from ..mesh import MESH_SUFFIXES, load_tet_mesh, write_mesh
 
-    mesh = load_tet_mesh(args.source, edge_length=args.edge_length, units=args.units, core_plane_z=args.core_plane)
-    strain, report = solve_field_report(mesh, kind=args.kind, modulus=args.modulus, core_depth=args.core_depth, source=args.source)
+    check_modulus(args.modulus)
+    for path, suffixes in ((args.output, MESH_SUFFIXES), (args.png, (".png",))):
+        if path is not None:
+            check_output(path, suffixes=suffixes)
+    with status(f"meshing {args.source}"):
+        mesh = load_tet_mesh(args.source, edge_length=args.edge_length, units=args.units, core_plane_z=args.core_plane)
+    with status(f"solving the {args.kind} strain field ({mesh.num_tets} tets; the first solve compiles)"):
+        strain, report = solve_field_report(mesh, kind=args.kind, modulus=args.modulus, core_depth=args.core_depth, source=args.source)
     if args.output:
         write_mesh(mesh, args.output, point_data={"strain": strain, "pressure_Pa": args.modulus * strain})
     if args.png:

@@ -105,13 +105,18 @@ def print_fit_table(report: dict, truth: dict | None = None) -> None:
     table.add_column("fitted", justify="right")
     table.add_column("± std. error", justify="right")
     table.add_column("rel.", justify="right")
+    notes = {}
 
     def row(name, estimate, true=None, unit=""):
         value, std = estimate["value"], estimate["std"]
         cells = [name]
         if truth is not None:
             cells.append("" if true is None else f"{true:.6g}{unit}")
-        cells += [f"{value:.6g}{unit}", f"{std:.3g}{unit}", f"{std / abs(value):.2%}" if value else ""]
+        if estimate.get("identified", True):
+            cells += [f"{value:.6g}{unit}", f"{std:.3g}{unit}", f"{std / abs(value):.2%}" if value else ""]
+        else:  # the solver's last word, not a measurement: no error bar that looks like one
+            cells += [f"({value:.3g}{unit})", "NOT IDENTIFIED", ""]
+            notes.setdefault(estimate.get("note", ""), []).append(name)
         table.add_row(*cells)
 
     pa = "" if relative else " Pa"
@@ -125,6 +130,8 @@ def print_fit_table(report: dict, truth: dict | None = None) -> None:
     if len(report["gains"]) > 8:
         table.add_row(f"... {len(report['gains']) - 8} more gains in report.json", *[""] * (len(table.columns) - 1))
     Console().print(table)
+    for note, names in notes.items():
+        print(f"  not identified: {', '.join(names)}: {note}")
 
 
 def print_press_table(report: dict) -> None:

@@ -3,7 +3,7 @@
 from pathlib import Path
 
 from ._arguments import add_source_arguments
-from ._output import print_report
+from ._output import print_report, status
 
 
 def add_parser(subparsers):
@@ -16,9 +16,14 @@ def add_parser(subparsers):
 
 
 def run(args) -> None:
-    from ..mesh import calc_mesh_quality, load_tet_mesh, write_mesh
+    from .._files import check_output
+    from ..mesh import MESH_SUFFIXES, calc_mesh_quality, load_tet_mesh, write_mesh
 
-    mesh = load_tet_mesh(args.source, edge_length=args.edge_length, units=args.units, core_plane_z=args.core_plane)
+    for path, suffixes in ((args.output, MESH_SUFFIXES), (args.vtk, (".vtk",)), (args.png, (".png",))):
+        if path is not None:
+            check_output(path, suffixes=suffixes)
+    with status(f"meshing {args.source}"):
+        mesh = load_tet_mesh(args.source, edge_length=args.edge_length, units=args.units, core_plane_z=args.core_plane)
     report = calc_mesh_quality(mesh)
     if args.output:
         write_mesh(mesh, args.output)

@@ -24,6 +24,7 @@ from ._pose import Pose as Pose
 from ._pose import calc_rotation_from_vector as calc_rotation_from_vector
 from ._pose import make_pose as make_pose
 from ._press import calc_skin_height as calc_skin_height
+from ._press import parse_at as parse_at
 from ._press import press_probe as press_probe
 from ._probes import (
     AbstractProbe as AbstractProbe,

@@ -27,6 +27,18 @@ def calc_skin_height(mesh: TetMesh, x: float, y: float) -> float:
     return float(np.max(z[inside]))
 
 
+def parse_at(at: str) -> tuple[float, float, float]:
+    """(x, y, depth) in metres from `--at` text "X,Y,DEPTH" (lengths with units; bare
+    numbers are metres); a one-line error naming --at otherwise."""
+    parts = at.split(",")
+    if len(parts) != 3:
+        raise HydrotactError(f"--at: expected X,Y,DEPTH (e.g. 0,2.2mm,0.5mm), got {at!r}")
+    x, y, depth = (parse_length(p, "--at") for p in parts)
+    if depth < 0:
+        raise HydrotactError(f"--at: the depth must be >= 0, got {depth:g} m")
+    return x, y, depth
+
+
 def press_probe(mesh: TetMesh, strain, modulus: float, probe_spec: str, at: str):
     """Press the probe straight down (along -z of the sensor) at (x, y) to the depth,
     measured from the skin there.
@@ -37,14 +49,15 @@ def press_probe(mesh: TetMesh, strain, modulus: float, probe_spec: str, at: str)
 
     **Returns:** (report dict, ContactSurface, probe, X_SP the probe's pose).
     """
-    parts = at.split(",")
-    if len(parts) != 3:
-        raise HydrotactError(f"--at: expected X,Y,DEPTH (e.g. 0,2.2mm,0.5mm), got {at!r}")
-    x, y, depth = (parse_length(p, "--at") for p in parts)
-    if depth < 0:
-        raise HydrotactError(f"--at: the depth must be >= 0, got {depth:g} m")
+    x, y, depth = parse_at(at)
     probe = parse_probe(probe_spec)
     top = calc_skin_height(mesh, x, y)
+    base = float(np.min(np.asarray(mesh.vertices)[:, 2]))
+    if depth >= top - base:
+        raise HydrotactError(
+            f"--at: depth {depth * 1e3:.4g} mm reaches the sensor's base: the skin over ({x * 1e3:.4g}, {y * 1e3:.4g}) mm is {(top - base) * 1e3:.4g} mm "
+            "above it (is the depth measured from the skin, and in the right unit?)"
+        )
     X_SP = make_pose([x, y, top - depth])
     field = make_pressure_field(mesh, strain, modulus)
     surface, _ = compute_contact_surface(field, probe, X_SP)

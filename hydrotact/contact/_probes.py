@@ -245,6 +245,11 @@ def _read_count(key: str, value: str) -> int:
         raise HydrotactError(f"--probe {key}: cannot read {value!r} as a whole number") from None
 
 
+MAX_PROBE_SIZE = 0.1
+"""The largest probe length (m) a probe spec may give: beyond it a bare number was
+surely meant in mm."""
+
+
 def parse_probe(spec: str) -> AbstractProbe:
     """The probe a spec string names (host): 'cylinder:d=2mm[,length=10mm][,sides=48]',
     'sphere:r=3mm[,subdivisions=3]', 'box:x=4mm,y=4mm,z=2mm' or 'plane'.
@@ -257,11 +262,17 @@ def parse_probe(spec: str) -> AbstractProbe:
     **Raises:** :class:`HydrotactError` naming the spec (or the option at fault).
     """
     kind, _, rest = spec.partition(":")
+    unknown = f"--probe: unknown probe {spec!r}; use cylinder:d=2mm, sphere:r=3mm, box:x=4mm,y=4mm,z=2mm or plane"
+    if kind not in ("plane", "cylinder", "sphere", "box"):
+        raise HydrotactError(unknown)
     options = {}
     for item in filter(None, rest.split(",")):
         key, _, value = item.partition("=")
         key = key.strip()
         options[key] = _read_count(key, value) if key in _COUNTS else parse_length(value, f"--probe {key}")
+        if key not in _COUNTS and not 0.0 < options[key] <= MAX_PROBE_SIZE:
+            problem = "must be positive" if not options[key] > 0.0 else f"is no tactile probe (over {MAX_PROBE_SIZE:g} m; a bare number is metres: write {key}={value.strip()}mm?)"
+            raise HydrotactError(f"--probe {key}: {options[key]:g} m {problem}")
     if kind == "plane" and not options:
         return HalfSpace()
     if kind == "cylinder" and set(options) <= {"d", "length", "sides"} and "d" in options:
@@ -270,4 +281,4 @@ def parse_probe(spec: str) -> AbstractProbe:
         return make_sphere_probe(options["r"], options.get("subdivisions", SPHERE_SUBDIVISIONS))
     if kind == "box" and set(options) == {"x", "y", "z"}:
         return make_box_probe((options["x"], options["y"], options["z"]))
-    raise HydrotactError(f"--probe: unknown probe {spec!r}; use cylinder:d=2mm, sphere:r=3mm, box:x=4mm,y=4mm,z=2mm or plane")
+    raise HydrotactError(unknown)

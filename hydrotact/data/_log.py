@@ -15,12 +15,13 @@ with the figures.
 """
 
 import json
+import re
 import warnings
 from pathlib import Path
 
 import numpy as np
 
-from .._errors import HydrotactError
+from .._errors import HydrotactError, HydrotactWarning
 from .._files import atomic_path
 from .._schemas import parse_json, read_json, validate
 from ._mapping import ColumnMapping, apply_mapping, load_mapping
@@ -35,9 +36,15 @@ GAP_STEPS = 3.0
 RATE_LIMIT = 0.02
 # Tared or elastic pressures beyond this many pascals are no barometer reading (10 MPa).
 PRESSURE_LIMIT_PA = 1e7
+# Absolute readings of a sensor whose part we do not know: a barometer in air, from
+# high altitude to a hard press (the BMP388 reads 30-125 kPa; others a little wider).
+ABSOLUTE_RANGE_PA = (2e4, 3e5)
+# An elastic pressure below -this x the channel's peak is negative, not round-off (a
+# viscoelastic simulation relaxes to -1e-13 Pa after a 1e5 Pa press).
+NEGATIVE_ROUND_OFF = 1e-9
 
 
-class LogWarning(UserWarning):
+class LogWarning(HydrotactWarning):
     """A log that reads but may mislead a fit: uneven sampling, gaps, a rate other
     than the declared one. The message gives the figures."""
 
@@ -64,8 +71,21 @@ def _check_values(log: BarometerLog, name: str, values: np.ndarray, source: str,
         raise HydrotactError(f"{source}: column {label}, row {row + 1}: {values[row]} is not a finite number")
 
 
-def _check_pressures(log: BarometerLog, source: str) -> None:
+def _unit_hint(value: float, low: float, high: float) -> str:
+    """The pressure unit a reading outside [low, high] Pa was most likely in."""
+    for unit, size in (("hPa or mbar", 100.0), ("kPa", 1e3), ("bar", 1e5), ("psi", 6894.757293168361)):
+        if low <= value * size <= high:
+            return f" (in {unit}? the mapping's unit, or the channel's scale, converts it)"
+    return " (is the unit, the scale or the pressure reference right?)"
+
+
+def _check_pressures(log: BarometerLog, source: str, spec=None) -> None:
+    """Readings a barometer can give: absolute ones positive and within the part's
+    range (or, for a sensor we do not know, near the atmosphere), elastic ones
+    (simulated elastomer pressure) never negative, none beyond 10 MPa."""
     reference = log.metadata["pressure"]
+    low, high = (float(v) for v in spec.part.range_pa) if spec is not None else ABSOLUTE_RANGE_PA
+    part = f"the {spec.part.name}'s range" if spec is not None else "the range of a barometer in air"
     for name in log.metadata["channels"]:
         values = np.asarray(log.columns[name], dtype=np.float64)
         label = log.describe_column(name)
@@ -75,6 +95,40 @@ def _check_pressures(log: BarometerLog, source: str) -> None:
         if np.any(np.abs(values) > PRESSURE_LIMIT_PA):
             row = int(np.flatnonzero(np.abs(values) > PRESSURE_LIMIT_PA)[0])
             raise HydrotactError(f"{source}: column {label}, row {row + 1}: {values[row]:g} Pa is beyond the {PRESSURE_LIMIT_PA:g} Pa no barometer reads (is the unit right?)")
+        if reference == "absolute":  # a part clips at its limits (the fit masks those); beyond them is a unit slip
+            outside = (values < low) | (values > high)
+            if np.any(outside):
+                row = int(np.flatnonzero(outside)[0])
+                raise HydrotactError(
+                    f"{source}: column {label}, row {row + 1}: {values[row]:.6g} Pa is outside {part}, {low:g}-{high:g} Pa{_unit_hint(values[row], low, high)}"
+                )
+        negative = values < -NEGATIVE_ROUND_OFF * max(float(np.max(np.abs(values), initial=0.0)), 1.0)  # not the round-off of a relaxed hereditary integral
+        if reference == "elastic" and np.any(negative):
+            row = int(np.flatnonzero(negative)[0])
+            raise HydrotactError(
+                f"{source}: column {label}, row {row + 1}: elastic pressure {values[row]:g} Pa is negative (the elastomer pushes, never pulls); "
+                "a barometer reading minus its baseline is pressure: tared"
+            )
+
+
+def _check_time_unit(log: BarometerLog, source: str, spec=None) -> None:
+    """Refuse a time column whose steps are 100x or more off the rate the log
+    declares (or its part's): time in ms (or us) read as seconds."""
+    times = np.asarray(log.columns["time"], dtype=np.float64)
+    if len(times) < 3:
+        return
+    declared = log.metadata.get("rate_hz") or (spec.part.rate_hz if spec is not None and log.metadata.get("pressure") == "absolute" else None)
+    if not declared:
+        return
+    measured = 1.0 / float(np.median(np.diff(times)))
+    ratio = declared / measured
+    if ratio >= 100.0 or ratio <= 0.01:
+        what = "rate_hz" if log.metadata.get("rate_hz") else f"its {spec.part.name}'s rate"
+        hint = "time in ms? (a mapping's time unit ms converts it)" if 300 <= ratio <= 3000 else "is the time column in seconds?"
+        raise HydrotactError(
+            f"{source}: column {log.describe_column('time')}: the median step is {1.0 / measured:.4g} s ({measured:.4g} Hz) but {what} is {declared:g} Hz "
+            f"({ratio:.3g}x): {hint}"
+        )
 
 
 def _warn_sampling(log: BarometerLog, source: str) -> None:
@@ -158,7 +212,8 @@ def check_log(log: BarometerLog, source: str, *, warn: bool = True) -> None:
     spec = sensor_spec(log.metadata["sensor"], source)
     if spec is not None and spec.num_taxels != len(channels):
         raise HydrotactError(f"{source}: channels: {len(channels)} channel columns, but sensor {log.metadata['sensor']!r} has {spec.num_taxels} taxels")
-    _check_pressures(log, source)
+    _check_pressures(log, source, spec)
+    _check_time_unit(log, source, spec)
     if warn:
         _warn_sampling(log, source)
 
@@ -222,11 +277,33 @@ def _to_numpy(column, name: str, source: str) -> np.ndarray:
             try:
                 float(text)
             except ValueError:
-                raise HydrotactError(f"{source}: column {name!r}, row {row + 1}: {text.strip()!r} is not a number") from None
+                comma = " (a decimal comma? write 0.5, not 0,5)" if re.fullmatch(r"\s*[-+]?\d+,\d+\s*", text) else ""
+                raise HydrotactError(f"{source}: column {name!r}, row {row + 1}: {text.strip()!r} is not a number{comma}") from None
         return np.array([np.nan if text is None else float(text) for text in column.to_pylist()])
     if column.null_count and (pa.types.is_integer(column.type) or pa.types.is_boolean(column.type)):
         column = column.cast(pa.float64())
     return column.to_numpy(zero_copy_only=False)
+
+
+def _check_delimiter(path: Path, source: str, delimiter: str, skip_rows: int) -> None:
+    """Refuse a CSV whose header holds no `delimiter` but another separator (';' as
+    spreadsheets in decimal-comma locales write, a tab, '|'), naming it."""
+    try:
+        with path.open("r", encoding="utf-8-sig", errors="strict") as handle:
+            for _ in range(skip_rows):
+                handle.readline()
+            header = handle.readline()
+    except UnicodeDecodeError:
+        raise HydrotactError(f"{source}: not a CSV text file (it is not UTF-8 text; a binary file?)") from None
+    if delimiter in header:
+        return
+    for mark in (";", "\t", "|", ","):
+        if mark != delimiter and mark in header:
+            comma = " (with decimal commas, too: write 0.5, not 0,5)" if mark == ";" else ""
+            raise HydrotactError(
+                f"{source}: the header {header.strip()[:40]!r} has no {delimiter!r}: the file separates fields by {mark!r}{comma}; "
+                "export it comma-separated, or give a column mapping whose csv.delimiter says so"
+            )
 
 
 def read_table(path, source: str | None = None, *, delimiter: str = ",", skip_rows: int = 0) -> dict:
@@ -247,6 +324,7 @@ def read_table(path, source: str | None = None, *, delimiter: str = ",", skip_ro
         except (pa.ArrowException, OSError) as error:
             raise HydrotactError(f"{source}: not a readable Parquet file ({str(error).splitlines()[0]})") from None
     else:
+        _check_delimiter(path, source, delimiter, skip_rows)
         invalid = []
 
         def on_invalid(row):

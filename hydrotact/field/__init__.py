@@ -20,6 +20,8 @@ from ._distance import calc_distance_field as calc_distance_field
 from ._kinds import StrainFieldKind as StrainFieldKind
 from ._pressure import PressureField as PressureField
 from ._pressure import make_pressure_field as make_pressure_field
+from ._report import PLAUSIBLE_MODULUS_PA as PLAUSIBLE_MODULUS_PA
+from ._report import check_modulus as check_modulus
 from ._report import solve_field_report as solve_field_report
 from ._solve import (
     LaplaceProblem as LaplaceProblem,

@@ -1,16 +1,37 @@
 """Solve a mesh's strain field and report on it: sizes, timings, residual, ranges."""
 
 import time
+import warnings
 
 import jax
 import numpy as np
 
 from .._defaults import DEFAULT_MODULUS
-from .._errors import HydrotactError
+from .._errors import HydrotactError, HydrotactWarning
 from ..mesh import TetMesh
 from ._distance import calc_distance_field
 from ._kinds import StrainFieldKind
 from ._solve import make_laplace_problem, solve_strain
+
+PLAUSIBLE_MODULUS_PA = (1e3, 1e8)
+"""Hydroelastic moduli of real elastomer skins lie well inside this range (gels of a
+few kPa to stiff rubbers of tens of MPa): a modulus outside it draws a warning."""
+
+
+def check_modulus(modulus, what: str = "--modulus", warn: bool = True) -> float:
+    """The modulus as a float: refused unless a positive, finite pressure in Pa; with
+    `warn`, a :class:`HydrotactWarning` outside :data:`PLAUSIBLE_MODULUS_PA` (a unit slip)."""
+    try:
+        modulus = float(modulus)
+    except (TypeError, ValueError):
+        raise HydrotactError(f"{what}: the modulus must be a positive pressure in Pa, got {modulus!r}") from None
+    if not np.isfinite(modulus) or modulus <= 0:
+        raise HydrotactError(f"{what}: the modulus must be a positive pressure in Pa, got {modulus:g}")
+    low, high = PLAUSIBLE_MODULUS_PA
+    if warn and not low <= modulus <= high:
+        hint = "kPa or MPa meant? it takes Pa: 1e5 is 100 kPa" if modulus < low else "is it in Pa? 1e6 is 1 MPa"
+        warnings.warn(HydrotactWarning(f"{what}: {modulus:g} Pa is outside the moduli of elastomer skins, {low:g}-{high:g} Pa ({hint})"), stacklevel=2)
+    return modulus
 
 
 def solve_field_report(
@@ -32,9 +53,7 @@ def solve_field_report(
     timings, residual and the strain and pressure ranges; timings exclude compilation).
     """
     kind = StrainFieldKind.parse(kind, "field kind")
-    modulus = float(modulus)
-    if not np.isfinite(modulus) or modulus <= 0:
-        raise HydrotactError(f"the modulus must be a positive pressure in Pa, got {modulus:g}")
+    modulus = check_modulus(modulus, "modulus", warn=False)
     summary = {"kind": str(kind), "num_tets": mesh.num_tets, "num_vertices": mesh.num_vertices, "modulus_Pa": modulus}
     if kind == StrainFieldKind.LAPLACE:
         problem = make_laplace_problem(mesh, core_depth=core_depth, source=source)

@@ -25,8 +25,13 @@ def load_tet_mesh(
     """A tet mesh from a seed sensor name, a closed surface file or a mesh file.
 
     Surfaces are meshed by fTetWild with their core on the plane z = `core_plane_z`
-    (default: the lowest z of the surface, where it sits on the PCB).
+    (default: the lowest z of the surface, where it sits on the PCB). `edge_length`,
+    `core_plane_z` and a surface file's coordinates are in `units`.
     """
+    if units not in LENGTH_UNITS:
+        raise HydrotactError(f"--units: unknown length unit {units!r}; use one of {', '.join(LENGTH_UNITS)}")
+    if edge_length is not None:
+        edge_length = float(edge_length) * LENGTH_UNITS[units]
     if spec in SEED_SENSORS:
         return make_seed_mesh(spec, edge_length)
     path = Path(spec)

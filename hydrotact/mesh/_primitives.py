@@ -11,7 +11,7 @@ import itertools
 
 import numpy as np
 
-from .._errors import HydrotactError
+from .._errors import HydrotactError, where
 from ._tags import Plane, make_face_tagger
 from ._tetmesh import CORE, FREE, INSULATED, TetMesh, make_tet_mesh, orient_tets
 
@@ -58,6 +58,25 @@ def _check_positive(name: str, value: float) -> float:
     return value
 
 
+MAX_TETS = 10_000_000
+"""The most tets a mesh request may ask for (about 2 GB of mesh and field on the host);
+an edge length that would exceed it is refused before any meshing (usually a unit slip)."""
+
+TETS_PER_CUBE = 8.5
+"""Tets of a good mesh per cube of its edge length (a regular tet is a^3 / (6 sqrt 2))."""
+
+
+def check_tet_budget(num_tets: float, edge_length: float, volume: float, what: str, source: str | None = None) -> None:
+    """Refuse an edge length that would make more than :data:`MAX_TETS` tets (an
+    estimate, `num_tets`, of a body of `volume` m^3), naming the smallest edge allowed."""
+    if num_tets > MAX_TETS:
+        smallest = (TETS_PER_CUBE * volume / MAX_TETS) ** (1.0 / 3.0)
+        raise HydrotactError(
+            f"{where(source)}edge length {edge_length:g} m would make about {num_tets:.2g} tets of {what}; "
+            f"hydrotact meshes up to {MAX_TETS:.0e} (an edge of at least {smallest:.2g} m; is the unit right?)".replace("e+0", "e")
+        )
+
+
 def make_box(
     size_S: tuple[float, float, float],
     edge_length: float,
@@ -66,15 +85,19 @@ def make_box(
     bottom: str = "core",
     top: str = "free",
     sides: str = "free",
+    source: str | None = None,
 ) -> TetMesh:
     """A box [x0, x0 + sx] x [y0, y0 + sy] x [0, sz] centred at `center_xy`, bottom on z = 0.
 
     Cells are cubes of side at most `edge_length` (rounded so the box is divided
     evenly). `bottom`, `top` and `sides` are tag names: "free", "core" or "insulated".
+    `source` names the box in messages.
     """
     size = np.array([_check_positive("box size", s) for s in size_S])
     edge_length = _check_positive("edge length", edge_length)
-    num_cells = tuple(int(n) for n in np.maximum(1, np.ceil(size / edge_length - 1e-9)))
+    cells = np.maximum(1.0, np.ceil(size / edge_length - 1e-9))
+    check_tet_budget(6.0 * float(np.prod(cells)), edge_length, float(np.prod(size)), "a {:.3g} x {:.3g} x {:.3g} mm box".format(*(size * 1e3)), source)
+    num_cells = tuple(int(n) for n in cells)
     grid_vertices, tets, _ = _kuhn_grid(num_cells)
     origin = np.array([center_xy[0] - size[0] / 2, center_xy[1] - size[1] / 2, 0.0])
     vertices = origin + grid_vertices / np.array(num_cells) * size

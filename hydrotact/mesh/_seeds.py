@@ -85,7 +85,7 @@ def make_seed_mesh(name: str, edge_length: float | None = None) -> TetMesh:
         raise HydrotactError(f"unknown sensor {name!r}; the built-in ones are {sorted(SEED_SENSORS)}")
     spec = SEED_SENSORS[name]
     if spec["shape"] == "box":
-        return make_box(spec["size_m"], spec["edge_length_m"] if edge_length is None else edge_length)
+        return make_box(spec["size_m"], spec["edge_length_m"] if edge_length is None else edge_length, source=name)
     if edge_length is None or float(edge_length) == spec["edge_length_m"]:
         return _load_shipped(name)
     return tetrahedralize(seed_surface(name), edge_length, core=Plane((0.0, 0.0, 0.0)), source=name)

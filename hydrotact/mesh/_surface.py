@@ -11,6 +11,10 @@ from .._units import LENGTH_UNITS
 from ._tetmesh import check_vertices
 
 SURFACE_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
+SURFACE_SIZE_M = (1e-4, 1.0)
+"""The bounding-box diagonals (m) of the elastomers hydrotact meshes: a surface outside
+is a unit slip (a pad in mm read as metres is 10 m across)."""
+
 
 def load_surface(path, units: str = "m") -> trimesh.Trimesh:
     """Read a closed surface (STL, OBJ, PLY, ...) and scale it to metres (host)."""
@@ -20,12 +24,19 @@ def load_surface(path, units: str = "m") -> trimesh.Trimesh:
     if not path.is_file():
         raise HydrotactError(f"{path}: no such file")
     try:
-        surface = trimesh.load(str(path), force="mesh", process=True)
+        surface = trimesh.load(str(path), force="mesh", process=False)
     except Exception as error:  # trimesh raises many kinds for unreadable files
-        raise HydrotactError(f"{path}: cannot read as a surface mesh ({error})") from None
+        raise HydrotactError(f"{path}: cannot read as a surface mesh ({str(error)[:100]})") from None
     if not isinstance(surface, trimesh.Trimesh) or len(surface.faces) == 0:
         raise HydrotactError(f"{path}: contains no triangles")
+    check_vertices(surface.vertices, str(path))  # before processing, which would drop a NaN vertex and report holes
+    surface.process()
     surface.apply_scale(LENGTH_UNITS[units])
+    size = float(np.linalg.norm(np.ptp(surface.vertices, axis=0)))
+    low, high = SURFACE_SIZE_M
+    if not low <= size <= high:
+        hint = "in mm? (--units mm)" if size > high else "is --units right? (the file's numbers are read in --units)"
+        raise HydrotactError(f"{path}: a surface {size:.3g} m across (in --units {units}) is no tactile sensor's elastomer ({low * 1e3:g} mm to {high:g} m): {hint}")
     return surface
 
 
@@ -88,6 +99,12 @@ def check_surface(vertices, faces, source: str | None = None) -> tuple[np.ndarra
     faces = np.asarray(faces, dtype=np.int64)
     if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) < 4:
         raise HydrotactError(f"{where(source)}a closed surface needs at least 4 triangles, got faces of shape {faces.shape}")
+    triangles = vertices[faces]
+    areas = 0.5 * np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1)
+    if np.any(areas <= 1e-12 * areas.sum()):  # before the closedness test, which a degenerate triangle would fail
+        k = int(np.argmin(areas))
+        at = np.round(triangles[k].mean(axis=0), 9).tolist()
+        raise HydrotactError(f"{where(source)}triangle {k} has zero area (vertices {faces[k].tolist()}, near {at}); remove degenerate triangles first")
     surface = trimesh.Trimesh(vertices, faces, process=True)
     if not surface.is_watertight:
         edges = surface.edges_sorted
@@ -99,10 +116,6 @@ def check_surface(vertices, faces, source: str | None = None) -> tuple[np.ndarra
         raise HydrotactError(f"{where(source)}the surface is not closed ({detail}); close its holes first")
     if not surface.is_winding_consistent:
         raise HydrotactError(f"{where(source)}the surface's triangles are not wound consistently")
-    areas = surface.area_faces
-    if np.any(areas <= 1e-12 * surface.area):
-        k = int(np.argmin(areas))
-        raise HydrotactError(f"{where(source)}triangle {k} has zero area")
     crossing = find_self_intersections(np.asarray(surface.vertices), np.asarray(surface.faces))
     if len(crossing):
         i, j = (int(k) for k in crossing[0])

@@ -9,6 +9,7 @@ import numpy as np
 from .._errors import HydrotactError, where
 from .._files import atomic_path, cache_dir, digest
 from .._geometry import calc_distance_to_triangles
+from ._primitives import TETS_PER_CUBE, check_tet_budget
 from ._surface import check_surface
 from ._tags import FaceSelection, Plane, make_face_tagger
 from ._tetmesh import CORE, TetMesh, make_tet_mesh, orient_tets
@@ -115,6 +116,8 @@ def tetrahedralize(
         raise HydrotactError(
             f"{where(source)}edge length {edge_length:g} m exceeds the surface's size ({diagonal:.3g} m diagonal)"
         )
+    volume = float(np.prod(vertices.max(axis=0) - vertices.min(axis=0)))
+    check_tet_budget(TETS_PER_CUBE * volume / edge_length**3, edge_length, volume, f"a surface {diagonal * 1e3:.3g} mm across", source)
     tet_vertices, tets = _run_tetwild(vertices, faces, edge_length, epsilon, use_cache)
     if len(tets) == 0:
         raise HydrotactError(f"{where(source)}fTetWild produced no tets (is the surface too thin for edge length {edge_length:g} m?)")

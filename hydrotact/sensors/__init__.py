@@ -12,6 +12,9 @@ from ._spec import (
     SensorSpec as SensorSpec,
 )
 from ._spec import (
+    calc_sensor_surface as calc_sensor_surface,
+)
+from ._spec import (
     known_parts as known_parts,
 )
 from ._spec import (

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import HydrotactError
-from .._schemas import format_path, parse_json, read_json, validate
+from .._schemas import format_path, load_schema, parse_json, read_json, validate
 from .._units import LENGTH_UNITS, UNITS
 from ..mesh import SEED_SENSORS, SURFACE_SUFFIXES, TetMesh, load_surface, load_tet_mesh, make_seed_mesh, seed_surface
 from ._builtins import BUILTIN_SENSORS
@@ -145,7 +145,7 @@ class SensorSpec:
             scale = LENGTH_UNITS[geometry.surface_units]
             mesh = load_tet_mesh(
                 geometry.path,
-                edge_length=geometry.edge_length,
+                edge_length=None if geometry.edge_length is None else geometry.edge_length / scale,  # in the file's units, as core_plane_z
                 units=geometry.surface_units,
                 core_plane_z=geometry.core_plane_z / scale,
             )
@@ -280,12 +280,21 @@ def _make_geometry(entry: dict, length: float, length_unit: str, source: str, ba
     )
 
 
+@functools.cache
+def _reserved_names() -> frozenset:
+    """The column names of a barometer log other than channels (its schema's list)."""
+    return frozenset(load_schema("barometer_log")["$defs"]["columns"]["default"])
+
+
 def _read_taxels(taxels: list, length: float, angle: float, angle_unit: str, source: str):
     names, positions, axes, kinds, sizes = [], [], [], [], []
     seen = {}
+    reserved = _reserved_names()
     for index, taxel in enumerate(taxels):
         here = ["taxels", index]
         name = taxel["name"]
+        if name in reserved:
+            _fail(source, [*here, "name"], f"{name!r} is a reserved log column (time, probe, wrench and label columns); a channel needs another name")
         if name in seen:
             _fail(source, [*here, "name"], f"{name!r} is already the name of taxels[{seen[name]}]")
         seen[name] = index
@@ -370,25 +379,63 @@ def _seed_surface(name: str) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(vertices), np.asarray(faces)
 
 
-def _check_against_surface(spec: SensorSpec) -> None:
-    """Every port inside the elastomer's closed surface or on it (cheap: no meshing)."""
+def calc_sensor_surface(spec: SensorSpec) -> tuple[np.ndarray, np.ndarray]:
+    """The elastomer's closed surface (vertices (n, 3) m, faces (k, 3)), without
+    meshing: for cheap checks (ports inside, where a probe can reach)."""
     geometry = spec.geometry
     if geometry.kind == "seed":
-        vertices, faces = _seed_surface(geometry.seed)
-        what = f"the {geometry.seed} elastomer"
-    else:
-        try:
-            surface = load_surface(geometry.path, geometry.surface_units)
-        except HydrotactError as error:
-            raise HydrotactError(f"{spec.source}: geometry.path: {error}") from None
-        if not surface.is_watertight:
-            _fail(spec.source, ["geometry", "path"], f"{geometry.path} is not a closed surface")
-        vertices, faces = np.asarray(surface.vertices), np.asarray(surface.faces)
-        what = f"the surface {Path(geometry.path).name}"
-    tolerance = _SURFACE_TOLERANCE * float(np.linalg.norm(np.ptp(vertices, axis=0)))
-    outside = find_points_outside_surface(spec.taxel_positions_S, vertices, faces, tolerance)
+        return _seed_surface(geometry.seed)
+    try:
+        surface = load_surface(geometry.path, geometry.surface_units)
+    except HydrotactError as error:
+        raise HydrotactError(f"{spec.source}: geometry.path: {error}") from None
+    if not surface.is_watertight:
+        _fail(spec.source, ["geometry", "path"], f"{geometry.path} is not a closed surface")
+    return np.asarray(surface.vertices), np.asarray(surface.faces)
+
+
+def _first_exits(origins, directions, vertices, faces, tolerance):
+    """Where each ray origins[i] + t directions[i] (t > tolerance) first meets the
+    surface (Möller-Trumbore over every triangle, numpy), NaN where it meets none."""
+    triangles = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]
+    a, e1, e2 = triangles[:, 0], triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]
+    h = np.cross(directions[:, None, :], e2[None])  # (rays, triangles, 3)
+    det = np.einsum("rti,ti->rt", h, e1)
+    ok = np.abs(det) > 1e-300
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    s = origins[:, None, :] - a[None]
+    u = np.einsum("rti,rti->rt", s, h) * inv
+    q = np.cross(s, e1[None])
+    v = np.einsum("ri,rti->rt", directions, q) * inv
+    t = np.einsum("ti,rti->rt", e2, q) * inv
+    hit = ok & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t > tolerance)
+    nearest = np.where(hit, t, np.inf).min(axis=1)
+    return np.where(np.isfinite(nearest)[:, None], origins + np.where(np.isfinite(nearest), nearest, 0.0)[:, None] * directions, np.nan)
+
+
+def _check_against_surface(spec: SensorSpec) -> None:
+    """Every port inside the elastomer's closed surface or on it, and every axis
+    pointing into it (cheap: no meshing)."""
+    vertices, faces = calc_sensor_surface(spec)
+    what = f"the {spec.geometry.seed} elastomer" if spec.geometry.kind == "seed" else f"the surface {Path(spec.geometry.path).name}"
+    diagonal = float(np.linalg.norm(np.ptp(vertices, axis=0)))
+    outside = find_points_outside_surface(spec.taxel_positions_S, vertices, faces, _SURFACE_TOLERANCE * diagonal)
     if len(outside):
         raise HydrotactError(_outside_message(spec, outside[0], what))
+    # Along its axis a port must reach the skin, not the base it sits on (the PCB,
+    # the lowest z): an axis pointing out of the elastomer, or down into the board,
+    # reads nothing, ever.
+    tolerance = _SURFACE_TOLERANCE * diagonal
+    exits = _first_exits(spec.taxel_positions_S, spec.taxel_axes_S, vertices, faces, tolerance)
+    base = float(np.min(vertices[:, 2]))
+    wrong = np.flatnonzero(~np.isfinite(exits[:, 2]) | (exits[:, 2] <= base + 1e3 * tolerance))
+    if len(wrong):
+        index = int(wrong[0])
+        axis = ", ".join(f"{v:.3g}" for v in spec.taxel_axes_S[index])
+        raise HydrotactError(
+            f"{spec.source}: taxels[{index}].axis: ({axis}) from the port does not reach the skin of {what} (it points out of it, or into the base): "
+            "the barometer would read nothing, ever; the axis goes from the port into the elastomer, towards the skin"
+        )
 
 
 def _outside_message(spec: SensorSpec, index: int, what: str) -> str:

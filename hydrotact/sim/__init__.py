@@ -39,6 +39,7 @@ from ._log import (
 )
 from ._model import SensorModel as SensorModel
 from ._model import make_sensor_model as make_sensor_model
+from ._reach import check_reach as check_reach
 from ._simulate import (
     CONTACT_THRESHOLD_N as CONTACT_THRESHOLD_N,
 )

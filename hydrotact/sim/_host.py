@@ -32,8 +32,9 @@ from ._model import SensorModel
 from ._simulate import Samples, SimCapacity, UnitResponse, calc_samples, calc_unit_response
 from ._trajectory import Trajectory, find_distinct_poses
 
-# Distinct poses per saved block of a resumable run.
-BLOCK = 512
+# Distinct poses per saved block of a resumable run: one jitted chunk (a kill loses at
+# most one block: seconds of work on a laptop CPU).
+BLOCK = 128
 _CACHE_VERSION = "unit-responses-2"
 
 
@@ -42,10 +43,10 @@ def _chunk_response(model, probe, X_SR, capacity):
     return map_over_poses(lambda X: calc_unit_response(model, probe, X, capacity), X_SR)
 
 
-def compute_unit_responses(model: SensorModel, probe, X_SR, capacity: SimCapacity | None = None, chunk: int = 128):
+def compute_unit_responses(model: SensorModel, probe, X_SR, capacity: SimCapacity | None = None, chunk: int = 128, on_chunk=None):
     """Unit responses for a batch of poses, in jitted chunks of `chunk` poses, growing
-    buffers (and recomputing the chunk) whenever one overflows (host; progress is
-    shown per block by :func:`compute_pose_responses`).
+    buffers (and recomputing the chunk) whenever one overflows (host; `on_chunk(n)`
+    is called after each chunk of n poses, for progress).
 
     **Returns:** (UnitResponse with a leading sample axis, as NumPy arrays; the
     capacity that sufficed).
@@ -60,6 +61,8 @@ def compute_unit_responses(model: SensorModel, probe, X_SR, capacity: SimCapacit
         unit, capacity = run_growing(lambda size, poses=poses: _chunk_response(model, probe, poses, size), capacity)
         used = min(chunk, count - start)
         pieces.append(jax.tree_util.tree_map(lambda a, used=used: np.asarray(a)[:used], unit))
+        if on_chunk is not None:
+            on_chunk(used)
     unit = jax.tree_util.tree_map(lambda *parts: np.concatenate(parts), *pieces)
     return unit, capacity
 
@@ -115,7 +118,9 @@ def compute_pose_responses(model: SensorModel, probe, pose_rows, *, progress: bo
     - `progress`: show a progress bar over the poses.
     - `checkpoint`: a file to save finished blocks in (atomically, after each); a
       checkpoint of the same inputs left by an interrupted run is resumed from. The
-      caller removes it once its own output is written.
+      caller removes it once its own output is written. Without one, a cached run
+      keeps its blocks beside its cache entry (`KEY.partial.npz`, removed once the
+      entry is written): a killed fit of many logs resumes inside the log it was on.
     - `cache`: look the responses up in, and store them into, the on-disk cache.
 
     **Returns:** UnitResponse (NumPy arrays, leading axis D).
@@ -128,22 +133,33 @@ def compute_pose_responses(model: SensorModel, probe, pose_rows, *, progress: bo
         saved = _load_blocks(_cache_path(key), key)
         if saved:
             return UnitResponse(**saved[0])
-    checkpoint = None if checkpoint is None else Path(checkpoint)
+    own_checkpoint = checkpoint is None and cache
+    checkpoint = _cache_path(key).with_suffix(".partial.npz") if own_checkpoint else (None if checkpoint is None else Path(checkpoint))
     blocks = [] if checkpoint is None else _load_blocks(checkpoint, key)
     done = sum(len(block["area"]) for block in blocks)  # not len(blocks) * BLOCK: they may have been saved with another BLOCK
     count = len(rows)
     with tqdm(total=count, initial=min(count, done), unit="pose", desc=f"simulating {model.name} ({count} distinct poses)", disable=not progress) as bar:
+        if done < count:  # the first chunk compiles the contact and ray kernels: say so, not a frozen 0 %
+            bar.set_postfix_str("compiling the contact kernels (once per sensor and probe)", refresh=True)
+
+        def advance(used):
+            bar.set_postfix_str("", refresh=False)
+            bar.update(min(used, count - bar.n))  # the last block's padding is no pose
+
+        size = min(BLOCK, count)  # every block one shape (the last padded): one compilation
         for start in range(done, count, BLOCK):
             stop = min(count, start + BLOCK)
-            X_SR = jax.vmap(make_pose)(jnp.asarray(rows[start:stop, :3]), jnp.asarray(rows[start:stop, 3:]))
-            unit, capacity = compute_unit_responses(model, probe, X_SR, capacity)
-            blocks.append({field.name: np.asarray(getattr(unit, field.name)) for field in dataclasses.fields(unit)})
+            index = np.minimum(np.arange(start, start + size), count - 1)
+            X_SR = jax.vmap(make_pose)(jnp.asarray(rows[index, :3]), jnp.asarray(rows[index, 3:]))
+            unit, capacity = compute_unit_responses(model, probe, X_SR, capacity, chunk=size, on_chunk=advance)
+            blocks.append({field.name: np.asarray(getattr(unit, field.name))[: stop - start] for field in dataclasses.fields(unit)})
             if checkpoint is not None:
                 _save_blocks(checkpoint, key, blocks)
-            bar.update(stop - start)
     arrays = {name: np.concatenate([block[name] for block in blocks]) for name in blocks[0]}
     if cache:
         _save_blocks(_cache_path(key), key, [arrays])
+    if own_checkpoint:
+        checkpoint.unlink(missing_ok=True)
     return UnitResponse(**arrays)
 
 

@@ -21,6 +21,10 @@ from ._model import make_sensor_model
 from ._simulate import Samples
 from ._trajectory import Trajectory, resample_trajectory
 
+MAX_GAIN_SPREAD = 0.25
+"""The largest standard deviation of the channel gains a simulation takes (a gain of 1
+± 25 %: beyond it a draw may put a gain at or below 0)."""
+
 
 @dataclasses.dataclass(frozen=True)
 class BarometerSettings:
@@ -44,12 +48,23 @@ class BarometerSettings:
             value = float(getattr(self, name))
             if not np.isfinite(value) or value < 0.0:
                 raise HydrotactError(f"--{name.replace('_', '-')}: must be a non-negative number, got {value:g}")
+        if self.gain_spread > MAX_GAIN_SPREAD:
+            raise HydrotactError(
+                f"--gain-spread: {self.gain_spread:g} is a spread of {self.gain_spread:.0%} around a gain of 1; at most {MAX_GAIN_SPREAD:g} "
+                "(cast barometers differ by a few per cent; a gain must stay positive)"
+            )
+        if self.noise_rms is not None and (not np.isfinite(float(self.noise_rms)) or float(self.noise_rms) < 0.0):
+            raise HydrotactError(f"--noise: must be a non-negative pressure in Pa, got {float(self.noise_rms):g}")
 
     def draw(self, part, num_channels: int) -> tuple[BarometerSignal, np.random.Generator]:
-        """The channels' signal model (gains drawn around 1, kept above 0.05; offsets
-        around 0) and the generator the load-cell noise is drawn from next (host)."""
+        """The channels' signal model (gains drawn around 1, offsets around 0) and the
+        generator the load-cell noise is drawn from next (host). A draw that puts a
+        gain below 0.05 (over 3.8 spreads down) is refused, never clipped."""
         rng = np.random.default_rng(self.seed)
-        gains = np.clip(1.0 + self.gain_spread * rng.standard_normal(num_channels), 0.05, None)
+        gains = 1.0 + self.gain_spread * rng.standard_normal(num_channels)
+        if np.any(gains < 0.05):
+            low = int(np.argmin(gains))
+            raise HydrotactError(f"--gain-spread: seed {self.seed} draws a gain of {gains[low]:.3g} for channel {low}; use another --seed or a smaller spread")
         offsets = self.offset_spread * rng.standard_normal(num_channels)
         return make_barometer_signal(part, num_channels, gains=gains, offsets=offsets, noise_rms=self.noise_rms), rng
 
@@ -57,6 +72,12 @@ class BarometerSettings:
     def key(self):
         """The PRNG key of the barometer noise."""
         return jax.random.PRNGKey(self.seed)
+
+
+def calc_saturated(signal, readings) -> np.ndarray:
+    """(S, C) readings at the part's limits: the part clipped them (host)."""
+    low, high = (float(v) for v in np.asarray(signal.range_pa))
+    return (readings <= low) | (readings >= high)
 
 
 def material_metadata(material: Prony) -> dict:
@@ -139,6 +160,8 @@ def make_barometer_log(
             "gains": np.asarray(signal.gains).tolist(),
             "offsets_Pa": np.asarray(signal.offsets).tolist(),
             "force_noise_N": float(barometer.force_noise),
+            "range_Pa": np.asarray(signal.range_pa).tolist(),
+            "saturated_samples": [int(n) for n in np.sum(calc_saturated(signal, np.asarray(samples.readings)), axis=0)],
         }
     return BarometerLog(metadata=metadata, columns=columns)
 

@@ -1,6 +1,7 @@
 """Probe trajectories: sample times and the probe's pose X_SR at each, checked."""
 
 import csv
+import difflib
 from pathlib import Path
 
 import equinox as eqx
@@ -70,6 +71,27 @@ def make_trajectory(times, translations, rotation_vectors=None, source: str | No
     return Trajectory(times=jnp.asarray(times), translations=jnp.asarray(translations), rotation_vectors=jnp.asarray(rotation_vectors))
 
 
+def check_header(header: list[str], source: str) -> None:
+    """A trajectory header: time, x, y, z and optionally all of rx, ry, rz, each once,
+    nothing else (an unknown name is a typo or a misread file, never ignored)."""
+    if len(header) == 1 and any(mark in header[0] for mark in ";\t|"):
+        mark = next(mark for mark in ";\t|" if mark in header[0])
+        raise HydrotactError(f"{source}: the header {header[0][:40]!r} is one field: the file separates fields by {mark!r}; hydrotact reads comma-separated values")
+    for index, name in enumerate(header):
+        if name in header[:index]:
+            raise HydrotactError(f"{source}: column {name!r} appears twice in the header ({', '.join(header)})")
+    known = TRAJECTORY_COLUMNS + ROTATION_COLUMNS
+    for name in header:
+        if name not in known:
+            lower = [k for k in known if k == name.strip().lower()]
+            close = lower or difflib.get_close_matches(name, known, n=1)
+            hint = f" (did you mean {close[0]!r}?{' names are lower case' if lower else ''})" if close else ""
+            raise HydrotactError(f"{source}: unknown column {name!r}{hint}; a trajectory has time, x, y, z and optionally rx, ry, rz")
+    missing = [name for name in TRAJECTORY_COLUMNS if name not in header]
+    if missing:
+        raise HydrotactError(f"{source}: missing column(s) {', '.join(missing)} (has {', '.join(header) or 'no header'})")
+
+
 def read_trajectory(path, units: str = "m") -> Trajectory:
     """A trajectory from a CSV file with a header row: columns `time` (s), `x`, `y`,
     `z` (the probe tip in the sensor frame, in `units`) and optionally `rx`, `ry`,
@@ -86,10 +108,8 @@ def read_trajectory(path, units: str = "m") -> Trajectory:
             header = [name.strip() for name in next(reader, [])]
             rows = list(reader)
     except (UnicodeDecodeError, csv.Error) as error:
-        raise HydrotactError(f"{path}: not a CSV text file ({error})") from None
-    missing = [name for name in TRAJECTORY_COLUMNS if name not in header]
-    if missing:
-        raise HydrotactError(f"{path}: missing column(s) {', '.join(missing)} (has {', '.join(header) or 'no header'})")
+        raise HydrotactError(f"{path}: not a CSV text file ({str(error)[:80]})") from None
+    check_header(header, str(path))
     rotations = [name for name in ROTATION_COLUMNS if name in header]
     if rotations and len(rotations) != 3:
         raise HydrotactError(f"{path}: give all of rx, ry, rz or none (has {', '.join(rotations)})")
@@ -99,7 +119,8 @@ def read_trajectory(path, units: str = "m") -> Trajectory:
     values = np.empty((len(numbered), len(wanted)))
     for k, (row_number, row) in enumerate(numbered):
         if len(row) != len(header):
-            raise HydrotactError(f"{path}: row {row_number}: {len(row)} fields, expected {len(header)}")
+            hint = " (decimal commas? write 0.5, not 0,5)" if len(row) > len(header) else ""
+            raise HydrotactError(f"{path}: row {row_number}: {len(row)} fields, expected {len(header)}{hint}")
         for j, (name, column) in enumerate(zip(wanted, index)):
             try:
                 values[k, j] = float(row[column])

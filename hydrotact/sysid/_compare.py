@@ -425,12 +425,10 @@ def compare_fit(fit_dir, paths, output, *, mapping=None, tare="no-load", home="e
     import pyarrow.parquet as pq
 
     from .. import __version__
-    from .._files import atomic_path, write_text_atomic
+    from .._files import atomic_path, check_output, write_text_atomic
     from ._fit_logs import read_logs
 
-    output = Path(output)
-    if output.exists() and not output.is_dir():
-        raise HydrotactError(f"{output}: exists and is not a folder; -o names the folder compare writes into")
+    output = check_output(output, directory=True, what="the comparison")
     tare = parse_tare(tare)
     if home not in HOMES:
         raise HydrotactError(f"--home: expected one of {', '.join(HOMES)}, got {home!r}")

@@ -54,6 +54,27 @@ class Estimate:
         return {"value": float(self.value), "std": float(self.std)}
 
 
+CHI_SQUARE_WARNING = 4.0
+"""A reduced χ² above this draws a warning: the model misses the data by more than
+their noise (a wrong sensor, swapped channel names, a unit slip), whatever the solver
+says about convergence."""
+
+MIN_TERM_FRACTION = 1e-4
+"""A Prony term whose modulus is below this fraction of E(0) moves no reading: its E
+and τ are the solver's last word, not measured."""
+
+
+def identify_time(value: float, std: float, step: float, span: float) -> tuple[bool, str]:
+    """Whether the data identify a time constant `value` ± `std` (s) sampled every
+    `step` s over `span` s: it lies in [step / 10, 10 x span] and its standard error
+    is below it; and, if not, why."""
+    if not step / 10 <= value <= 10 * span:
+        return False, f"outside [{step / 10:.3g} s, {10 * span:.3g} s] (sampling step / 10, 10 x the longest log)"
+    if not std < value:
+        return False, "standard error larger than the value"
+    return True, ""
+
+
 @dataclasses.dataclass(frozen=True)
 class FitResult:
     """The outcome of a fit (host, NumPy).
@@ -114,6 +135,35 @@ class FitResult:
         """(Eᵢ, τᵢ) estimates, τ ascending."""
         pairs = [(self._estimate(f"log_modulus_{k + 1}"), self._estimate(f"log_tau_{k + 1}")) for k in range(self.layout.num_terms)]
         return sorted(pairs, key=lambda pair: pair[1].value)
+
+    def identification(self) -> list[tuple[tuple[bool, str], tuple[bool, str]]]:
+        """Per term of :attr:`terms`: ((Eᵢ identified, why not), (τᵢ identified, why
+        not)). A τ outside [sampling step / 10, 10 x the longest log] or with a standard
+        error above it is not identified (nor is its Eᵢ: the term is then any slow or
+        fast remainder); a term under :data:`MIN_TERM_FRACTION` of E(0) moves no
+        reading, so neither number is measured, however small its standard error."""
+        step = float(np.median(np.concatenate([np.diff(np.asarray(log.times)) for log in self.problem.logs])))
+        span = max(float(np.asarray(log.times)[-1] - np.asarray(log.times)[0]) for log in self.problem.logs)
+        total = self.instantaneous_modulus.value
+        result = []
+        for modulus, tau in self.terms:
+            time_ok = identify_time(tau.value, tau.std, step, span)
+            if modulus.value < MIN_TERM_FRACTION * total:
+                small = (False, f"under {MIN_TERM_FRACTION:.0e} of E(0): the term moves no reading")
+                result.append((small, small))
+                continue
+            modulus_ok = (True, "") if modulus.std < modulus.value else (False, "standard error larger than the value")
+            if not time_ok[0]:
+                modulus_ok = (False, f"its τ is not identified ({time_ok[1]})")
+            result.append((modulus_ok, time_ok))
+        return result
+
+    def unidentified(self) -> list[str]:
+        """Names (E1, τ1, ...) of the parameters the data do not identify."""
+        names = []
+        for k, ((modulus_ok, _), (tau_ok, _)) in enumerate(self.identification()):
+            names += [name for name, ok in ((f"E{k + 1}", modulus_ok), (f"τ{k + 1}", tau_ok)) if not ok]
+        return names
 
     @property
     def instantaneous_modulus(self) -> Estimate:

@@ -7,13 +7,18 @@ Unit responses of full-mode fits are cached (they are the expensive part), so a 
 fit of the same logs with other options starts at once.
 """
 
+import math
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 from .._errors import HydrotactError
+from .._files import check_output
 from ..data import LogWarning, read_log, tare_log
-from ._fit import MAX_AUTO_TERMS, fit_auto, fit_problem
-from ._problem import make_fit_problem
+from ..data._table import sensor_spec
+from ._fit import CHI_SQUARE_WARNING, MAX_AUTO_TERMS, fit_auto, fit_problem
+from ._problem import check_pose_columns, find_clipped_readings, log_probe, make_fit_problem
 from ._report import write_fit_outputs
 from ._solve import make_solver, solver_name
 
@@ -31,17 +36,48 @@ def parse_terms(text) -> int | str:
     return value
 
 
+def _content_digest(log) -> str:
+    """A SHA-256 of a log's samples (time and channels): the same log under two names
+    (or in two formats) has one."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for values in (log.times, log.channels):
+        h.update(np.ascontiguousarray(values, dtype=np.float64).tobytes())
+    return h.hexdigest()
+
+
+def _check_responds(log, source: str) -> None:
+    """Refuse a log in which no channel moves (nothing to fit: a dead sensor, a log
+    before any press, or a column mapping onto the wrong columns)."""
+    channels = log.channels
+    if channels.shape[0] and np.all(np.ptp(channels, axis=0) == 0.0):
+        names = log.metadata["channels"]
+        raise HydrotactError(
+            f"{source}: no channel varies ({len(names)} channels, each constant; {names[0]} = {channels[0, 0]:g} Pa): nothing to fit; "
+            "is it the right log, or the mapping's right columns?"
+        )
+
+
 def read_logs(paths, mapping=None, sensor=None, report_warning=None, require_sensor: bool = True):
     """Read and check every log first (one error line, nothing written). Warnings
     that repeat across the logs (uneven sampling, say) are reported once, with the
     number of logs and the first one named."""
     if not paths:
         raise HydrotactError("no logs given")
-    logs, seen = [], {}
+    logs, seen, digests = [], {}, {}
     for path in paths:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", LogWarning)
-            logs.append(read_log(path, mapping, sensor=sensor, require_sensor=require_sensor))
+            log = read_log(path, mapping, sensor=sensor, require_sensor=require_sensor)
+        key = _content_digest(log)
+        if key in digests:
+            raise HydrotactError(
+                f"{path}: holds the same samples as {digests[key]}: a log given twice counts its noise twice (standard errors shrink by √2); give each log once"
+            )
+        digests[key] = path
+        _check_responds(log, str(path))
+        logs.append(log)
         for warning in caught:
             if issubclass(warning.category, LogWarning) and report_warning is not None:
                 message = str(warning.message)
@@ -72,9 +108,7 @@ def fit_logs(
     `plot` then draws a PressFit. `max_steps` caps the solver's steps. Returns the report (with `files`)."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    output = Path(output)
-    if output.exists() and not output.is_dir():
-        raise HydrotactError(f"{output}: exists and is not a folder; -o names the folder the fit writes into")
+    output = check_output(output, directory=True, what="the fit")
     if solver is None or isinstance(solver, str):
         solver = make_solver(solver or "lm")
     name = solver_name(solver)
@@ -83,8 +117,24 @@ def fit_logs(
         options = dict(press_options or {}, **({"max_steps": max_steps} if max_steps is not None else {}))
         return _fit_press_files(paths, output, sensor, indentation, mapping, terms, solver, tare, report_warning, plot, options)
     logs = read_logs([Path(p) for p in paths], mapping, sensor, report_warning)
+    for log, path in zip(logs, paths):  # every log checked before the first is simulated
+        check_pose_columns(log, str(path))
+        if sensor_spec(log.metadata["sensor"], str(path)) is None:
+            raise HydrotactError(
+                f"{path}: sensor: {log.metadata['sensor']!r} is neither a built-in sensor nor a sensor JSON file here: a full fit simulates the sensor "
+                "(name an existing spec in the log's metadata, relative to this folder), or fit --lumped"
+            )
+        log_probe(log, str(path))
     if tare:
         logs = [tare_log(log, source=str(path))[0] for log, path in zip(logs, paths)]
+    for log, path in zip(logs, paths):
+        clipped = find_clipped_readings(log, log.channels).sum(axis=0)
+        if clipped.any() and report_warning is not None:
+            names = [name for name, n in zip(log.metadata["channels"], clipped) if n]
+            report_warning(
+                f"{path}: {int(clipped.sum())} readings on {len(names)} channels ({', '.join(names[:4])}{', ...' if len(names) > 4 else ''}) sit at the "
+                "part's range limits (the barometer clipped them): masked, not fitted"
+            )
     problem = make_fit_problem(logs, field=field, num_rays=num_rays, sources=[str(p) for p in paths], progress=progress)
     counts = list(range(MAX_AUTO_TERMS + 1)) if terms == "auto" else [terms]
     with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} fits"), TimeElapsedColumn(), transient=True, disable=not progress) as bar:
@@ -94,8 +144,18 @@ def fit_logs(
         else:
             result = fit_problem(problem, terms, solver, max_steps=max_steps)
             bar.update(task, advance=1)
+    messages = []
     if not result.converged:
-        message = f"the {name} solver stopped before converging ({result.num_steps} steps; raise --max-steps); the numbers below are its last iterate"
+        messages.append(f"the {name} solver stopped before converging ({result.num_steps} steps; raise --max-steps); the numbers below are its last iterate")
+    if result.reduced_chi_square > CHI_SQUARE_WARNING:
+        messages.append(
+            f"reduced χ² {result.reduced_chi_square:.3g}: the model misses the data by {math.sqrt(result.reduced_chi_square):.2g} noise stds RMS; "
+            "are the sensor, the channel names and the units right? (see residuals.png)"
+        )
+    unidentified = result.unidentified()
+    if unidentified:
+        messages.append(f"not identified by these logs: {', '.join(unidentified)} (marked in the table and report.json; fewer --terms, or longer logs)")
+    for message in messages:
         if report_warning is not None:
             report_warning(message)
     report = write_fit_outputs(result, output, paths=[str(p) for p in paths], plot=plot)
@@ -111,5 +171,13 @@ def _fit_press_files(paths, output, sensor, indentation, mapping, terms, solver,
     if terms != "auto" and terms > MAX_TERMS:
         raise HydrotactError(f"--terms: a lumped fit takes 0 to {MAX_TERMS} Prony terms or auto, got {terms}")
     logs = read_logs([Path(p) for p in paths], mapping, sensor, report_warning, require_sensor=False)
+    sensors = {log.metadata.get("sensor") for log in logs}
+    if len(sensors) > 1:
+        first = logs[0].metadata.get("sensor")
+        other = next(k for k, log in enumerate(logs) if log.metadata.get("sensor") != first)
+        raise HydrotactError(
+            f"{paths[other]}: from sensor {logs[other].metadata.get('sensor')!r}, but {paths[0]} is from {first!r}: a lumped fit is one sensor's "
+            "channel law (fit each sensor on its own)"
+        )
     fit = fit_press_logs(logs, [str(p) for p in paths], terms=terms, indentation=indentation, solver=solver, report=report_warning, **options)
     return write_press_fit_outputs(fit, output, paths=[str(p) for p in paths], plot=plot)

@@ -86,7 +86,7 @@ def design_block(times, inputs, observed, weights, centred_columns: int, taus):
     step = max(1, len(times) // _MAX_ROWS)
     basis = np.array(_basis(jnp.asarray(times), jnp.asarray(inputs), jnp.asarray(taus))[::step])
     observed = np.asarray(observed, dtype=np.float64)[::step].copy()
-    weights = np.asarray(weights, dtype=np.float64)
+    weights = np.asarray(weights, dtype=np.float64)[::step]
     observed[:, :centred_columns] -= observed[:, :centred_columns].mean(axis=0)
     basis[:, :centred_columns] -= basis[:, :centred_columns].mean(axis=0)
-    return (basis * weights[None, :, None]).reshape(-1, basis.shape[2]), (observed * weights[None, :]).reshape(-1)
+    return (basis * weights[:, :, None]).reshape(-1, basis.shape[2]), (observed * weights).reshape(-1)

@@ -89,7 +89,7 @@ def calc_predictions(x, problem: FitProblem, layout: ParameterLayout, method: st
 def calc_residuals(x, problem: FitProblem, layout: ParameterLayout):
     """Weighted residuals (observed − model) / noise of all logs, one flat vector."""
     predictions = calc_predictions(x, problem, layout)
-    return jnp.concatenate([((log.observed - prediction) * log.weights[None, :]).reshape(-1) for log, prediction in zip(problem.logs, predictions)])
+    return jnp.concatenate([((log.observed - prediction) * log.weights).reshape(-1) for log, prediction in zip(problem.logs, predictions)])
 
 
 def pack(layout: ParameterLayout, *, long_term, moduli, taus, gains, offsets) -> np.ndarray:

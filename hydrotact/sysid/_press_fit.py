@@ -34,6 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import HydrotactError
+from ._fit import CHI_SQUARE_WARNING, identify_time
 from ._lumped import (
     LAG_BOUND,
     ONSET_HALF_RANGE,
@@ -49,7 +50,6 @@ from ._press_windows import POWERS
 from ._presses import POSITION_COLUMNS, PRESS_THRESHOLD
 from ._solve import make_solver, solve_least_squares, solver_name
 
-CHI_SQUARE_WARNING = 4.0  # a reduced χ² above this: the model misses the data
 MAX_TERMS = 3  # Prony terms the lumped model tries with terms="auto"
 
 
@@ -170,14 +170,6 @@ def _initial_x(layout: PressLayout, logs: list[PressLog], lag: float = 0.0, star
     if layout.estimate_lag:
         parts.append(np.full(len(logs), math.atanh(float(lag) / LAG_BOUND)))
     return np.concatenate(parts)
-
-
-def _identified_time(value, std, step, span):
-    if not step / 10 <= value <= 10 * span:
-        return False, f"outside [{step / 10:.3g} s, {10 * span:.3g} s] (sampling step / 10, 10 x the longest log)"
-    if not std < value:
-        return False, "standard error larger than the value"
-    return True, ""
 
 
 @eqx.filter_jit
@@ -342,7 +334,7 @@ def _summarise(
     for i in order:
         ratio, ratio_std = math.exp(x[i]), math.exp(x[i]) * std_x[i]
         tau, tau_std = math.exp(x[k + i]), math.exp(x[k + i]) * std_x[k + i]
-        ok, note = _identified_time(tau, tau_std, step, span)
+        ok, note = identify_time(tau, tau_std, step, span)
         ratios.append(Parameter(ratio, ratio_std, ok and ratio_std < ratio, note or ("" if ratio_std < ratio else "standard error larger than the value")))
         taus.append(Parameter(tau, tau_std, ok, note))
     first = 2 * k

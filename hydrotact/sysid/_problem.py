@@ -39,6 +39,18 @@ ROTATION_COLUMNS = ("probe_rx", "probe_ry", "probe_rz")
 _SILENT_FRACTION = 1e-3
 
 
+def find_clipped_readings(log, channels) -> np.ndarray:
+    """(T, C) readings of an absolute log at or beyond its part's range (the part
+    clips there: the pressure behind the reading is unknown), for a known sensor."""
+    from ..data._table import sensor_spec
+
+    spec = sensor_spec(log.metadata.get("sensor", ""))
+    if spec is None or log.metadata.get("pressure") != "absolute":
+        return np.zeros(np.shape(channels), dtype=bool)
+    low, high = spec.part.range_pa
+    return (np.asarray(channels) <= low) | (np.asarray(channels) >= high)
+
+
 class LogArrays(eqx.Module):
     """One log, ready for the residual function (device arrays).
 
@@ -48,7 +60,8 @@ class LogArrays(eqx.Module):
     - `inputs` (T, C + F): unit-modulus responses of the C channels then the F force
       columns (Pa and N per Pa of E).
     - `observed` (T, C + F): the channels (Pa) and the reference forces (N).
-    - `weights` (C + F,): 1 / noise standard deviation.
+    - `weights` (T, C + F): 1 / noise standard deviation; 0 where a barometer
+      clipped (a reading at or beyond its part's range: the pressure is unknown there).
     - `offset_base`, `offset_scale` (C,): the channel offset is base + scale · θ.
     - `gain_index` (C,): index into the shared gains, −1 for a fixed gain of 1.
     """
@@ -56,7 +69,7 @@ class LogArrays(eqx.Module):
     times: Float[Array, " num_samples"]
     inputs: Float[Array, "num_samples num_inputs"]
     observed: Float[Array, "num_samples num_columns"]
-    weights: Float[Array, " num_columns"]
+    weights: Float[Array, "num_samples num_columns"]
     offset_base: Float[Array, " num_channels"]
     offset_scale: Float[Array, " num_channels"]
     gain_index: Int[Array, " num_channels"]
@@ -89,7 +102,8 @@ class FitProblem(eqx.Module):
 
     @property
     def num_samples(self) -> int:
-        return sum(int(log.observed.size) for log in self.logs)
+        """The residuals that count (the masked, clipped readings do not)."""
+        return sum(int(np.count_nonzero(np.asarray(log.weights))) for log in self.logs)
 
     def without_infos(self) -> "FitProblem":
         """The same problem without the per-log descriptions: what jitted calls get,
@@ -113,24 +127,38 @@ def _log_pose_rows(log) -> np.ndarray:
     return np.column_stack([np.asarray(log.columns[name], dtype=np.float64) for name in POSE_COLUMNS] + [np.asarray(log.columns.get(name, zeros), dtype=np.float64) for name in ROTATION_COLUMNS])
 
 
+def check_pose_columns(log, source: str) -> None:
+    """Refuse a log without the probe pose columns a full-mode fit simulates."""
+    missing = [name for name in POSE_COLUMNS if name not in log.columns]
+    if missing:
+        raise HydrotactError(f"{source}: a full-mode fit needs the probe pose; column {missing[0]!r} is missing (or fit with --lumped --indentation COLUMN)")
+
+
+def log_probe(log, source: str):
+    """The probe a log's metadata names, or an error naming the file and the field."""
+    from ..contact import parse_probe
+
+    if "probe" not in log.metadata:
+        raise HydrotactError(f"{source}: metadata has no 'probe' (e.g. cylinder:d=2mm); a full-mode fit needs to know the probe")
+    try:
+        return parse_probe(log.metadata["probe"])
+    except HydrotactError as error:
+        raise HydrotactError(f"{source}: probe: {str(error).removeprefix('--probe').lstrip(': ')}") from None
+
+
 def _unique_pose_responses(log, source: str, field: str, num_rays: int, progress: bool):
     """Unit responses of the log's taxels and contact force at its probe poses: each
     distinct pose is simulated once (holds repeat poses), through the simulator's
     cache of unit responses (so a log simulated by hydrotact fits at once)."""
-    from ..contact import parse_probe
     from ..sensors import load_sensor
     from ..sim import compute_trajectory_responses, make_sensor_model, make_trajectory
 
     metadata = log.metadata
-    missing = [name for name in POSE_COLUMNS if name not in log.columns]
-    if missing:
-        raise HydrotactError(f"{source}: a full-mode fit needs the probe pose; column {missing[0]!r} is missing (or fit with --lumped --indentation COLUMN)")
-    if "probe" not in metadata:
-        raise HydrotactError(f"{source}: metadata has no 'probe' (e.g. cylinder:d=2mm); a full-mode fit needs to know the probe")
+    check_pose_columns(log, source)
     spec = load_sensor(metadata["sensor"], source=f"{source}: sensor")
     if spec.num_taxels != len(metadata["channels"]):
         raise HydrotactError(f"{source}: channels: {len(metadata['channels'])} channels, but sensor {spec.name} has {spec.num_taxels} taxels")
-    probe = parse_probe(metadata["probe"])
+    probe = log_probe(log, source)
     model = make_sensor_model(spec, field_kind=field, num_rays=num_rays)
     rows = _log_pose_rows(log)
     trajectory = make_trajectory(np.asarray(log.times, dtype=np.float64), rows[:, :3], rows[:, 3:], source=source)
@@ -189,8 +217,10 @@ def make_fit_problem(
             keep = [FORCE_COLUMNS.index(name) for name in force_columns]
             inputs = np.column_stack([taxels, forces[:, keep]])
             observed = np.column_stack([observed] + [np.asarray(log.columns[name], dtype=np.float64) for name in force_columns])
-        noise = estimate_noise(observed)
         num_channels = len(channels)
+        clipped = np.zeros(observed.shape, dtype=bool)
+        clipped[:, :num_channels] = find_clipped_readings(log, observed[:, :num_channels])
+        noise = estimate_noise(observed)
         gain_index = np.full(num_channels, -1)
         if force_columns:
             strength = np.max(np.abs(inputs[:, :num_channels]), axis=0)
@@ -205,7 +235,7 @@ def make_fit_problem(
                 times=jnp.asarray(times),
                 inputs=jnp.asarray(inputs),
                 observed=jnp.asarray(observed),
-                weights=jnp.asarray(1.0 / noise),
+                weights=jnp.asarray(np.where(clipped, 0.0, 1.0 / noise[None, :])),
                 offset_base=jnp.asarray(baseline),
                 offset_scale=jnp.asarray(noise[:num_channels]),
                 gain_index=jnp.asarray(gain_index),

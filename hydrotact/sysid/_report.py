@@ -73,6 +73,11 @@ def make_fit_material(result: FitResult, paths=(), name: str | None = None) -> d
     return document
 
 
+def _identified(estimate, verdict) -> dict:
+    ok, note = verdict
+    return {**estimate.to_json(), "identified": ok, **({"note": note} if note else {})}
+
+
 def make_report(result: FitResult) -> dict:
     """The fit's numbers as a JSON-ready dict."""
     report = {
@@ -90,7 +95,9 @@ def make_report(result: FitResult) -> dict:
         "bic": result.bic,
         "long_term_modulus_Pa": result.long_term_modulus.to_json(),
         "instantaneous_modulus_Pa": result.instantaneous_modulus.to_json(),
-        "prony_terms": [{"modulus_Pa": m.to_json(), "tau_s": t.to_json()} for m, t in result.terms],
+        "prony_terms": [
+            {"modulus_Pa": _identified(m, m_ok), "tau_s": _identified(t, t_ok)} for (m, t), (m_ok, t_ok) in zip(result.terms, result.identification())
+        ],
         "gains": {name: estimate.to_json() for name, estimate in result.gains.items()},
         "offsets_Pa": [{"source": info.source, "channels": {k: v.to_json() for k, v in offsets.items()}} for info, offsets in zip(result.problem.infos, result.offsets())],
         "residuals": result.residual_diagnostics(),
@@ -115,8 +122,9 @@ def calc_relaxation_band(result: FitResult, times, draws: int = 400, seed: int =
         terms = np.exp(x[:, 1 : 1 + count])[:, None, :] * np.exp(-times[None, :, None] / np.exp(x[:, 1 + count :])[:, None, :])
         return np.exp(x[:, 0])[:, None] + terms.sum(axis=-1)
 
-    curves = moduli(samples)
-    return moduli(mean)[0], np.percentile(curves, 2.5, axis=0), np.percentile(curves, 97.5, axis=0)
+    with np.errstate(over="ignore", invalid="ignore"):  # a fit far from its data has a vast covariance: its band is then unbounded, not an error
+        curves = moduli(samples)
+        return moduli(mean)[0], np.percentile(curves, 2.5, axis=0), np.percentile(curves, 97.5, axis=0)
 
 
 def write_fit_outputs(result: FitResult, out_dir, paths=(), plot=None) -> dict:

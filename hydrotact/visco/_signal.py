@@ -2,7 +2,8 @@
 
     reading(t) = ambient + offset + gain · p(t) + drift · (t − t₀) + noise,
 
-quantised to the part's least significant bit and sampled at the log's rate. p is the
+quantised to the part's least significant bit, clipped to the part's range (a BMP388
+reads 30-125 kPa: a deeper press saturates it) and sampled at the log's rate. p is the
 elastomer pressure at the taxel (from the elastic or viscoelastic model), `gain` the
 channel's sensitivity (how much of the elastomer pressure reaches the membrane: 1 for
 an ideal casting), `offset` its factory offset, `drift` a slow linear drift (aged or
@@ -23,7 +24,9 @@ class BarometerSignal(eqx.Module):
     """Per-channel barometer numbers (a pytree).
 
     **Fields:** `ambient` Pa; `offsets` (C,) Pa; `gains` (C,); `drift_rates` (C,)
-    Pa/s; `noise_rms` Pa; `lsb` Pa (0 disables quantisation); `rate_hz` the output rate.
+    Pa/s; `noise_rms` Pa; `lsb` Pa (0 disables quantisation); `range_pa` (2,) the
+    part's lowest and highest reading, Pa (readings are clipped to it); `rate_hz` the
+    output rate.
     """
 
     ambient: Float[Array, ""]
@@ -32,6 +35,7 @@ class BarometerSignal(eqx.Module):
     drift_rates: Float[Array, " num_channels"]
     noise_rms: Float[Array, ""]
     lsb: Float[Array, ""]
+    range_pa: Float[Array, "2"]
     rate_hz: float = eqx.field(static=True)
 
     @property
@@ -69,6 +73,7 @@ def make_barometer_signal(part, num_channels: int, *, gains=None, offsets=None, 
         drift_rates=per_channel(drift_rates, 0.0, "drift rates"),
         noise_rms=jnp.asarray(noise),
         lsb=jnp.asarray(float(part.lsb_pa)),
+        range_pa=jnp.asarray([float(v) for v in part.range_pa]),
         rate_hz=rate,
     )
 
@@ -88,7 +93,9 @@ def calc_resampled(times, values, sample_times):
 def calc_barometer_readings(signal: BarometerSignal, sample_times, pressures, key=None, quantise: bool = True):
     """Absolute readings (S, C) Pa of the channels for elastomer pressures (S, C) at
     `sample_times` (S,) (pure). Without `key`, no noise; `quantise` rounds to the
-    LSB (its gradient is that of the unrounded reading: a straight-through rule)."""
+    LSB (its gradient is that of the unrounded reading: a straight-through rule).
+    Readings are clipped to the part's range (zero gradient where clipped: the part
+    reports nothing of the pressure beyond it)."""
     elapsed = sample_times - sample_times[0]
     reading = signal.ambient + signal.offsets[None, :] + signal.gains[None, :] * pressures + signal.drift_rates[None, :] * elapsed[:, None]
     if key is not None:
@@ -97,4 +104,4 @@ def calc_barometer_readings(signal: BarometerSignal, sample_times, pressures, ke
         lsb = jnp.where(signal.lsb > 0.0, signal.lsb, 1.0)
         rounded = jnp.where(signal.lsb > 0.0, jnp.round(reading / lsb) * lsb, reading)
         reading = reading + jax.lax.stop_gradient(rounded - reading)
-    return reading
+    return jnp.clip(reading, signal.range_pa[0], signal.range_pa[1])

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._plots import save_figure
+from ._plots import new_figure, save_figure
 
 _MAX_PLOTTED_CHANNELS = 8
 
@@ -17,8 +17,6 @@ _MAX_PLOTTED_CHANNELS = 8
 def plot_fit(result, out_dir) -> dict:
     """traces.png, residuals.png and relaxation.png of a `hydrotact.sysid.FitResult`
     in out_dir; returns their paths (the `plot` of `sysid.write_fit_outputs`)."""
-    import matplotlib.pyplot as plt
-
     from ..sysid import calc_relaxation_band
 
     out_dir = Path(out_dir)
@@ -28,7 +26,7 @@ def plot_fit(result, out_dir) -> dict:
     infos = result.problem.infos
 
     # Measured vs fitted: the channels that move most, per log.
-    figure, axes = plt.subplots(len(logs), 1, figsize=(10, 3.6 * len(logs)), squeeze=False)
+    figure, axes = new_figure(len(logs), 1, figsize=(10, 3.6 * len(logs)), squeeze=False)
     for axis, log, info, prediction in zip(axes[:, 0], logs, infos, predictions):
         observed = np.asarray(log.observed)
         times = np.asarray(log.times)
@@ -46,11 +44,11 @@ def plot_fit(result, out_dir) -> dict:
     save_figure(figure, paths["traces_png"])
 
     # Residuals in noise units.
-    figure, (left, right) = plt.subplots(1, 2, figsize=(11, 3.6), gridspec_kw={"width_ratios": [3, 1]})
+    figure, (left, right) = new_figure(1, 2, figsize=(11, 3.6), gridspec_kw={"width_ratios": [3, 1]})
     everything = []
     for log, info, prediction in zip(logs, infos, predictions):
         normalised = (np.asarray(log.observed) - prediction) * np.asarray(log.weights)
-        everything.append(normalised.reshape(-1))
+        everything.append(normalised[np.asarray(log.weights) > 0.0])  # not the clipped readings a fit masked
         for c, name in enumerate((info.channels + info.force_columns)[:_MAX_PLOTTED_CHANNELS]):
             left.plot(np.asarray(log.times), normalised[:, c], lw=0.4, alpha=0.7, label=name)
     left.set_xlabel("time [s]")
@@ -71,7 +69,7 @@ def plot_fit(result, out_dir) -> dict:
     times = np.logspace(np.log10(step / 2), np.log10(span * 2), 200)
     modulus, low, high = calc_relaxation_band(result, times)
     unit, label = 1e3, "E(t) [kPa]"
-    figure, axis = plt.subplots(figsize=(6.5, 4))
+    figure, axis = new_figure(figsize=(6.5, 4))
     axis.fill_between(times, low / unit, high / unit, alpha=0.3, label="95 % band")
     axis.semilogx(times, modulus / unit, "k", lw=1.2, label="fitted")
     for _, tau in result.terms:

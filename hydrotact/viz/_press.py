@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._plots import save_figure
+from ._plots import new_figure, save_figure
 
 MAX_CHANNEL_PANELS = 8
 
@@ -27,10 +27,8 @@ def _colour(c: int) -> str:
 def _press_panels(channels, series, path, title, ylabel="elastic part [Pa]") -> None:
     """One panel per channel: for each (channel, press) series (t, observed,
     predicted), observed as dots and predicted as a line."""
-    import matplotlib.pyplot as plt
-
     shown = list(channels)[:MAX_CHANNEL_PANELS]
-    figure, axes = plt.subplots(len(shown), 1, figsize=(9, 2.4 * len(shown) + 0.6), squeeze=False, sharex=True)
+    figure, axes = new_figure(len(shown), 1, figsize=(9, 2.4 * len(shown) + 0.6), squeeze=False, sharex=True)
     for c, (axis, name) in enumerate(zip(axes[:, 0], shown)):
         for times, observed, predicted in series[c]:
             axis.plot(times, observed, ".", ms=1.5, color=_colour(c), alpha=0.35)
@@ -49,9 +47,7 @@ def _press_panels(channels, series, path, title, ylabel="elastic part [Pa]") -> 
 
 def _residual_panels(channels, residuals, path, title, unit="residual / noise σ") -> None:
     """Residuals/σ against the time in the press per channel, and histograms."""
-    import matplotlib.pyplot as plt
-
-    figure, (left, right) = plt.subplots(1, 2, figsize=(11, 3.8), gridspec_kw={"width_ratios": [3, 2]})
+    figure, (left, right) = new_figure(1, 2, figsize=(11, 3.8), gridspec_kw={"width_ratios": [3, 2]})
     everything = []
     for c, name in enumerate(channels):
         times = np.concatenate([t for t, _ in residuals[c]]) if residuals[c] else np.zeros(0)
@@ -84,8 +80,6 @@ def _residual_panels(channels, residuals, path, title, unit="residual / noise σ
 def plot_press_fit(fit, out_dir) -> dict:
     """traces.png, residuals.png and relaxation.png of a `hydrotact.sysid.PressFit`
     in out_dir; returns their paths (the `plot` of `write_press_fit_outputs`)."""
-    import matplotlib.pyplot as plt
-
     out_dir = Path(out_dir)
     paths = {"traces_png": out_dir / "traces.png", "residuals_png": out_dir / "residuals.png", "relaxation_png": out_dir / "relaxation.png"}
     channels = list(fit.channels)
@@ -105,7 +99,7 @@ def plot_press_fit(fit, out_dir) -> dict:
     _press_panels(channels, series, paths["traces_png"], f"{len(fit.logs)} log(s), {sum(len(log.onset_start) for log in fit.logs)} presses: measured and fitted, baseline off")
     _residual_panels(channels, residuals, paths["residuals_png"], f"residuals (reduced χ² = {fit.reduced_chi_square:.3f})")
 
-    figure, axis = plt.subplots(figsize=(6, 3.6))
+    figure, axis = new_figure(figsize=(6, 3.6))
     times = np.geomspace(1e-2, 1e3, 300)
     ratios = np.array([r.value for r in fit.ratios])
     taus = np.array([t.value for t in fit.taus])

@@ -50,7 +50,7 @@ def render_mesh(mesh: TetMesh, path, title: str = "") -> None:
         plotter.add_mesh(_faces_polydata(mesh, FREE).clip(normal="y", origin=centre).extract_feature_edges(), color="black")
         title = f"{title}\ncore (bonded) faces in orange" if title else "core (bonded) faces in orange"
     plotter.add_text(title, font_size=12)
-    plotter.show_bounds(xtitle="x [mm]", ytitle="y [mm]", ztitle="z [mm]", font_size=10)
+    plotter.show_bounds(xtitle="x [mm]", ytitle="y [mm]", ztitle="z [mm]", font_size=16, fmt="%.1f")
     _view_from(plotter, grid.bounds, side=1.0, elevation=-0.6)  # from below: the bonded base shows
     _save(plotter, path)
 
@@ -72,7 +72,7 @@ def render_field(mesh: TetMesh, values, path, *, label: str, title: str = "") ->
     )
     plotter.add_mesh(grid.extract_feature_edges(), color="black", line_width=1)
     plotter.add_text(title, font_size=12)
-    plotter.show_bounds(xtitle="x [mm]", ytitle="y [mm]", ztitle="z [mm]", font_size=10)
+    plotter.show_bounds(xtitle="x [mm]", ytitle="y [mm]", ztitle="z [mm]", font_size=16, fmt="%.1f")
     _view_from(plotter, grid.bounds, side=1.0)  # the kept half is y < centre: face its cut
     _save(plotter, path)
 
@@ -106,14 +106,21 @@ def render_contact(mesh: TetMesh, surface, path, *, probe=None, X_SP=None, title
     plotter.add_mesh(skin, color="lightgrey", opacity=0.25)
     contact = _surface_polydata(surface)
     if contact.n_cells:
-        plotter.add_mesh(contact, scalars="pressure [Pa]", cmap="inferno", scalar_bar_args={"title": "pressure [Pa]", "vertical": True, "fmt": "%.3g", "position_x": 0.86, "width": 0.06})
+        top = max(float(np.max(contact.point_data["pressure [Pa]"])), 1e-300)  # pressures are >= 0: the bar starts at 0, not at round-off below it
+        bar = {"title": "pressure [Pa]", "vertical": True, "fmt": "%.3g", "position_x": 0.86, "width": 0.06}
+        plotter.add_mesh(contact, scalars="pressure [Pa]", cmap="inferno", clim=(0.0, top), scalar_bar_args=bar)
     else:
         title = f"{title}\n(no contact)"
     if probe is not None and X_SP is not None and hasattr(probe, "faces"):
         vertices = np.asarray(X_SP.apply(np.asarray(probe.vertices_R))) * 1e3
         faces = np.column_stack([np.full(probe.num_faces, 3), np.asarray(probe.faces)]).reshape(-1)
-        plotter.add_mesh(pv.PolyData(vertices, faces).extract_feature_edges(30.0), color="steelblue", line_width=2)
+        outline = pv.PolyData(vertices, faces)
+        edges = outline.extract_feature_edges(30.0)
+        if edges.n_points:  # a cylinder: its rims
+            plotter.add_mesh(edges, color="steelblue", line_width=2)
+        else:  # a smooth probe (a sphere) has no feature edges: draw it translucent
+            plotter.add_mesh(outline, color="steelblue", opacity=0.2, smooth_shading=True)
     plotter.add_text(title, font_size=12)
-    plotter.show_bounds(xtitle="x [mm]", ytitle="y [mm]", ztitle="z [mm]", font_size=10)
+    plotter.show_bounds(xtitle="x [mm]", ytitle="y [mm]", ztitle="z [mm]", font_size=16, fmt="%.1f")
     _view_from(plotter, skin.bounds, side=-1.0)
     _save(plotter, path)
