@@ -4,6 +4,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 from helpers import assert_one_line_error, box_surface, run_cli
 
 from hydrotact.field import DEFAULT_MODULUS
@@ -99,6 +100,24 @@ def test_contact_command(tmp_path):
 
     plane = json.loads(run_cli("contact", "--sensor", "sphere8", "--probe", "plane", "--at", "0,0,1mm", "--json").stdout)
     assert plane["num_polygons"] > 100 and plane["force_N"][2] < 0
+
+
+def test_contact_render_of_a_sphere_probe_on_the_sphere(tmp_path):
+    """The command a newcomer tried: a sphere probe (no feature edges to outline) on
+    sphere8, drawn to PNG; the report is printed first, whatever the render does."""
+    png = tmp_path / "c.png"
+    result = run_cli("contact", "--sensor", "sphere8", "--probe", "sphere:r=3mm", "--at", "1mm,0,0.5mm", "--png", png, "--json")
+    assert result.returncode == 0 and "Traceback" not in result.stderr, result.stderr
+    report = json.loads(result.stdout)
+    assert report["num_polygons"] > 50 and report["force_N"][2] < 0 and report["max_pressure_Pa"] > 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
+
+
+@pytest.mark.parametrize(("span", "step"), [(13.2, 2.5), (4.0, 1.0), (20.0, 5.0), (32.0, 10.0), (0.6, 0.1), (1.1, 0.2), (6.0, 1.0)])
+def test_render_axes_take_round_steps(span, step):
+    from hydrotact.viz._render import _nice_step
+
+    assert _nice_step(span) == pytest.approx(step)  # the smallest of 1, 2, 2.5, 5 x 10^k with at most 6 steps over the span
 
 
 def test_contact_command_errors():

@@ -22,13 +22,38 @@ def _faces_polydata(mesh: TetMesh, tag: int) -> pv.PolyData:
     return pv.PolyData(np.asarray(mesh.vertices, dtype=np.float64) * 1e3, cells)
 
 
-def _view_from(plotter: pv.Plotter, bounds_mm, side: float, elevation: float = 0.9) -> None:
-    """Look at the box `bounds_mm` from the -y (side=-1) or +y side, from above
-    (elevation > 0) or below (elevation < 0)."""
+def _view_from(plotter: pv.Plotter, bounds_mm, elevation: float = 0.5) -> None:
+    """Look at the box `bounds_mm` from the -y side, a little from +x, from above
+    (elevation > 0) or below (elevation < 0): x runs to the right and z up, as a
+    drawing of the sensor shows them, and a half cut away on the +y side shows its
+    cut face."""
     lo, hi = np.asarray(bounds_mm[0::2]), np.asarray(bounds_mm[1::2])
     centre, size = 0.5 * (lo + hi), float(np.linalg.norm(hi - lo))
-    eye = centre + size * np.array([0.55, 1.5 * side, elevation])
+    eye = centre + size * np.array([0.8, -1.5, elevation])
     plotter.camera_position = [tuple(eye), tuple(centre), (0.0, 0.0, 1.0)]
+
+
+def _nice_step(span: float) -> float:
+    """A round tick step (1, 2, 2.5 or 5 x 10^k) giving at most 7 ticks over `span`."""
+    for exponent in range(-3, 4):
+        for mantissa in (1.0, 2.0, 2.5, 5.0):
+            step = mantissa * 10.0**exponent
+            if span / step <= 6.0:
+                return step
+    return span
+
+
+def _show_axes(plotter: pv.Plotter, bounds_mm) -> None:
+    """Axes in mm with round ticks: each axis's range widened to whole steps, so the
+    labels read 0, 5, 10, ... (and 0 is 0, not -0.0)."""
+    bounds, counts, decimals = [], {}, 0
+    for axis, (lo, hi) in zip("xyz", np.reshape(bounds_mm, (3, 2))):
+        step = _nice_step(max(hi - lo, 1e-6))
+        first, last = np.floor(lo / step + 1e-9) * step, np.ceil(hi / step - 1e-9) * step
+        bounds += [first + 0.0, last + 0.0]
+        counts[f"n_{axis}labels"] = int(round((last - first) / step)) + 1
+        decimals = max(decimals, next(k for k in range(4) if abs(step * 10**k - round(step * 10**k)) < 1e-9 or k == 3))
+    plotter.show_bounds(bounds=bounds, xtitle="x [mm]", ytitle="y [mm]", ztitle="z [mm]", font_size=16, fmt=f"%.{decimals}f", **counts)
 
 
 def _save(plotter: pv.Plotter, path) -> None:
@@ -39,19 +64,20 @@ def _save(plotter: pv.Plotter, path) -> None:
 
 def render_mesh(mesh: TetMesh, path, title: str = "") -> None:
     """A PNG of the mesh cut in half by the plane y = centre (whole tets, with their
-    edges, so the inside shows), core faces orange; lengths in mm."""
+    edges, so the inside shows; the +y half kept, seen from -y), core faces orange;
+    lengths in mm."""
     grid = to_pyvista(mesh, scale=1e3)
     centre = np.asarray(grid.center)
     plotter = pv.Plotter(off_screen=True, window_size=_WINDOW)
-    plotter.add_mesh(grid.clip(normal="y", origin=centre, crinkle=True), color="lightgrey", show_edges=True, edge_color="dimgrey")
+    plotter.add_mesh(grid.clip(normal="y", origin=centre, crinkle=True, invert=False), color="lightgrey", show_edges=True, edge_color="dimgrey")
     core = _faces_polydata(mesh, CORE)
     if core.n_cells:
-        plotter.add_mesh(core.clip(normal="y", origin=centre), color="orange")
-        plotter.add_mesh(_faces_polydata(mesh, FREE).clip(normal="y", origin=centre).extract_feature_edges(), color="black")
+        plotter.add_mesh(core.clip(normal="y", origin=centre, invert=False), color="orange")
+        plotter.add_mesh(_faces_polydata(mesh, FREE).clip(normal="y", origin=centre, invert=False).extract_feature_edges(), color="black")
         title = f"{title}\ncore (bonded) faces in orange" if title else "core (bonded) faces in orange"
     plotter.add_text(title, font_size=12)
-    plotter.show_bounds(xtitle="x [mm]", ytitle="y [mm]", ztitle="z [mm]", font_size=16, fmt="%.1f")
-    _view_from(plotter, grid.bounds, side=1.0, elevation=-0.6)  # from below: the bonded base shows
+    _show_axes(plotter, grid.bounds)
+    _view_from(plotter, grid.bounds, elevation=-0.6)  # from below: the bonded base shows
     _save(plotter, path)
 
 
@@ -61,7 +87,7 @@ def render_field(mesh: TetMesh, values, path, *, label: str, title: str = "") ->
     grid = to_pyvista(mesh, scale=1e3)
     grid.point_data[label] = np.asarray(values, dtype=np.float64)
     centre = np.asarray(grid.center)
-    clipped = grid.clip(normal="y", origin=centre, crinkle=False)
+    clipped = grid.clip(normal="y", origin=centre, crinkle=False, invert=False)
     plotter = pv.Plotter(off_screen=True, window_size=_WINDOW)
     plotter.add_mesh(
         clipped,
@@ -72,8 +98,8 @@ def render_field(mesh: TetMesh, values, path, *, label: str, title: str = "") ->
     )
     plotter.add_mesh(grid.extract_feature_edges(), color="black", line_width=1)
     plotter.add_text(title, font_size=12)
-    plotter.show_bounds(xtitle="x [mm]", ytitle="y [mm]", ztitle="z [mm]", font_size=16, fmt="%.1f")
-    _view_from(plotter, grid.bounds, side=1.0)  # the kept half is y < centre: face its cut
+    _show_axes(plotter, grid.bounds)
+    _view_from(plotter, grid.bounds)  # the kept half is y > centre: its cut faces the camera
     _save(plotter, path)
 
 
@@ -103,7 +129,7 @@ def render_contact(mesh: TetMesh, surface, path, *, probe=None, X_SP=None, title
     with the probe's outline; lengths in mm."""
     plotter = pv.Plotter(off_screen=True, window_size=_WINDOW)
     skin = _faces_polydata(mesh, FREE)
-    plotter.add_mesh(skin, color="lightgrey", opacity=0.25)
+    plotter.add_mesh(skin, color="lightgrey", opacity=0.25, smooth_shading=True)
     contact = _surface_polydata(surface)
     if contact.n_cells:
         top = max(float(np.max(contact.point_data["pressure [Pa]"])), 1e-300)  # pressures are >= 0: the bar starts at 0, not at round-off below it
@@ -121,6 +147,6 @@ def render_contact(mesh: TetMesh, surface, path, *, probe=None, X_SP=None, title
         else:  # a smooth probe (a sphere) has no feature edges: draw it translucent
             plotter.add_mesh(outline, color="steelblue", opacity=0.2, smooth_shading=True)
     plotter.add_text(title, font_size=12)
-    plotter.show_bounds(xtitle="x [mm]", ytitle="y [mm]", ztitle="z [mm]", font_size=16, fmt="%.1f")
-    _view_from(plotter, skin.bounds, side=-1.0)
+    _show_axes(plotter, skin.bounds)
+    _view_from(plotter, skin.bounds)
     _save(plotter, path)
