@@ -555,6 +555,7 @@ CASES = [
     ("contact-on-a-mesh-file", "contact --mesh {d}/box.vtu --probe plane --at 0,0,0.1mm --modulus 2e5 --json", CLEAR, []),
     ("traj-bom-crlf", SIM + " --trajectory {d}/traj_crlf_bom.csv -o log.parquet --json", CLEAR, []),
     ("fit-short-log-4-terms", "fit {d}/baro.parquet -o fit --terms 4 --max-steps 60", WARNED, ["not identified by these logs", "τ"]),
+    ("fit-short-log-auto-terms", "fit {d}/baro.parquet -o fit --terms auto --json", CLEAR, []),
 ]
 
 SETUP = {  # cases whose working folder holds something first

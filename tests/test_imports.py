@@ -163,3 +163,12 @@ def test_importing_the_pictures_keeps_the_users_matplotlib_backend(tmp_path):
     assert result.returncode == 0, result.stderr[-2000:]
     assert result.stdout.split() == ["svg", "0"]
     assert (tmp_path / "log.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_schema_readme_names_the_schemas_there_are():
+    """data_schemas/README.md lists every schema file, and no file that is not there."""
+    import re
+
+    folder = PACKAGE.parent / "data_schemas"
+    named = set(re.findall(r"`([a-z_]+\.schema\.json)`", (folder / "README.md").read_text()))
+    assert named == {path.name for path in folder.glob("*.schema.json")}
