@@ -125,3 +125,22 @@ def test_contact_command_errors():
     assert_one_line_error(run_cli("contact", "--sensor", "pad5x5", "--probe", "plane", "--at", "0,0"), "--at", "X,Y,DEPTH")
     assert_one_line_error(run_cli("contact", "--sensor", "pad5x5", "--probe", "plane", "--at", "20mm,0,1mm"), "no part of the sensor lies under")
     assert_one_line_error(run_cli("contact", "--sensor", "pad5x5", "--probe", "cylinder:d=-2mm", "--at", "0,0,1mm"), "--probe d", "must be positive")
+
+
+def test_every_option_of_every_command_is_documented():
+    """--help says what each option does (none shows a bare flag), and the README's
+    command synopsis names each command's options."""
+    import argparse
+
+    from hydrotact.cli import make_parser
+
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    commands = next(action for action in make_parser()._actions if isinstance(action, argparse._SubParsersAction))
+    assert len(commands.choices) >= 7
+    for name, parser in commands.choices.items():
+        for action in parser._actions:
+            if isinstance(action, argparse._HelpAction) or not action.option_strings:
+                continue
+            assert action.help, f"hydrotact {name} {action.option_strings[-1]} has no help text"
+            longest = max(action.option_strings, key=len)
+            assert longest in readme or (longest == "--output" and "-o " in readme), f"the README never names hydrotact {name} {longest}"

@@ -118,7 +118,7 @@ def run_demo(out_dir, progress: bool = True, smoke: bool = False) -> dict:
 
 def add_parser(subparsers):
     parser = subparsers.add_parser("demo", help="the main job on built-in data: simulate a pad5x5 log with a known viscoelastic material, fit it back; results and pictures in out/")
-    parser.add_argument("-o", "--output", type=Path, default=Path("out"), metavar="DIR")
+    parser.add_argument("-o", "--output", type=Path, default=Path("out"), metavar="DIR", help="the folder to write the results and pictures in (default out)")
     parser.add_argument("--smoke", action="store_true", help="the same job at test-suite size (two presses, two Prony terms)")
     return parser
 
