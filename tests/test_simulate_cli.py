@@ -20,6 +20,7 @@ from hydrotact.data import read_log
 from hydrotact.sim import CONTACT_THRESHOLD_N
 
 BLOCK_SAMPLES = 3
+REAL_BLOCK = host.BLOCK  # what a run in another process uses (this one's is patched to BLOCK_SAMPLES)
 PROBE = "cylinder:d=2mm"
 RAYS = 16
 # time (s), x, y, z (mm): the pad's skin is at z = 4 mm; the taxels are on a 2.2 mm grid.
@@ -383,3 +384,50 @@ def test_interrupted_fit_of_many_logs_resumes(tmp_path, monkeypatch):
     assert whole.calls == 3 * blocks_per_log
     for key in ("long_term_modulus_Pa", "gains", "offsets_Pa", "reduced_chi_square"):
         assert json.dumps(report[key]) == json.dumps(uninterrupted[key]).replace("fit-whole", "fit"), key
+
+
+def test_simulate_killed_with_sigkill_resumes_to_the_same_log(tmp_path):
+    """A real kill: `hydrotact simulate` in its own process, SIGKILLed once its first
+    block of poses is saved, then run again: it starts from the saved poses (its
+    progress begins there), removes its partial file and writes the same bytes as an
+    uninterrupted run (each run with a cache of its own, so nothing comes from there)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    count = 3 * REAL_BLOCK
+    x = 1e-3 * np.linspace(-4.4, 4.4, count)
+    rows = [[k / 100.0, float(x[k]), float(1.1e-3 * np.sin(k / 9.0)), 3.7e-3] for k in range(count)]
+    trajectory = _write_trajectory(tmp_path / "traj.csv", rows)
+
+    def start(name, cache):
+        command = [sys.executable, "-m", "hydrotact.cli", "simulate", "--sensor", "pad5x5", "--probe", PROBE, "--trajectory", str(trajectory), "--rays", "8", "-o", str(tmp_path / name)]
+        env = {**os.environ, "HYDROTACT_CACHE_DIR": str(tmp_path / cache)}
+        return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+
+    killed = start("log.parquet", "cache")
+    partial = job.checkpoint_path(tmp_path / "log.parquet")
+    deadline = time.monotonic() + 500
+    while not partial.exists() and killed.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert killed.poll() is None, "the run ended before its first block was saved: " + killed.stderr.read()[-2000:]
+    killed.send_signal(signal.SIGKILL)
+    killed.communicate(timeout=60)
+    assert killed.returncode == -signal.SIGKILL
+    assert partial.is_file() and not (tmp_path / "log.parquet").exists()
+    with np.load(partial) as saved:
+        done = sum(len(saved[f"{b}/area"]) for b in range(int(saved["num_blocks"])))
+    assert 0 < done < count
+    resumed = start("log.parquet", "cache")
+    reference = start("reference.parquet", "reference-cache")
+    errors = []
+    for run in (resumed, reference):
+        _, err = run.communicate(timeout=600)
+        assert run.returncode == 0, err[-3000:]
+        errors.append(err)
+    assert f"| {done}/{count} [" in errors[0] and f"| 0/{count} [" not in errors[0], errors[0][-2000:]
+    assert f"| 0/{count} [" in errors[1]
+    assert not partial.exists()
+    assert (tmp_path / "log.parquet").read_bytes() == (tmp_path / "reference.parquet").read_bytes()
