@@ -1,0 +1,83 @@
+"""What the pictures show a person: every channel named, whole tick values, colour
+bars from zero, and the sensor drawn the way up a drawing of it shows.
+
+Each picture is caught just before it is written (the figure, or the pyvista plotter
+with its actors), and its parts are read back."""
+
+import numpy as np
+import pytest
+
+import hydrotact.viz._plots as plots
+import hydrotact.viz._render as render
+
+
+@pytest.fixture
+def caught(monkeypatch):
+    """The figures and plotters the pictures would have saved, in order."""
+    found = []
+
+    def keep_figure(figure, path):
+        found.append(figure)
+
+    def keep_plotter(plotter, path):
+        found.append(plotter)
+        plotter.render()
+
+    monkeypatch.setattr(plots, "save_figure", keep_figure)
+    monkeypatch.setattr(render, "_save", keep_plotter)
+    yield found
+    for item in found:
+        if hasattr(item, "close"):
+            item.close()
+
+
+def _absolute_log(num_channels: int):
+    """A log of absolute readings near the atmosphere that move by a few pascals: the
+    case where matplotlib writes '1e-8 + 1.013e2' above the axis by default."""
+    from hydrotact.data import BarometerLog
+
+    times = np.arange(200) / 100.0
+    columns = {"time": times}
+    for k in range(num_channels):
+        columns[f"c{k:02d}"] = 101325.0 + 3.0 * np.sin(times * (k + 1))
+    metadata = {"format": "hydrotact.barometer_log", "version": 1, "sensor": "test", "pressure": "absolute", "channels": list(columns)[1:], "rate_hz": 100.0}
+    return BarometerLog(metadata, columns)
+
+
+@pytest.mark.parametrize("num_channels", [4, 25])
+def test_a_log_plot_names_every_channel_and_writes_whole_ticks(caught, num_channels):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    log = _absolute_log(num_channels)
+    plots.plot_log(log, "unused.png", title="test")
+    [figure] = caught
+    FigureCanvasAgg(figure).draw()
+    axis = figure.axes[0]
+    legend = axis.get_legend()
+    assert legend is not None
+    assert [text.get_text() for text in legend.get_texts()] == log.metadata["channels"]
+    assert axis.yaxis.get_offset_text().get_text() == "", "an offset above the axis"
+    labels = [label.get_text() for label in axis.get_yticklabels() if label.get_text()]
+    assert labels and all(float(text.replace("−", "-")) > 100.0 for text in labels), labels  # kPa, whole values
+
+
+def test_the_contact_colour_bar_starts_at_zero_and_the_camera_looks_from_minus_y(caught):
+    from hydrotact.contact import press_probe
+    from hydrotact.field import solve_field_report
+    from hydrotact.mesh import load_tet_mesh
+
+    mesh = load_tet_mesh("pad5x5")
+    strain, _ = solve_field_report(mesh, modulus=1e6)
+    report, surface, probe, X_SP = press_probe(mesh, strain, 1e6, "cylinder:d=2mm", "0.37mm,0.11mm,0.3mm")
+    render.render_contact(mesh, surface, "unused.png", probe=probe, X_SP=X_SP, title="test")
+    [plotter] = caught
+    low, high = plotter.scalar_bars["pressure [Pa]"].GetLookupTable().GetRange()
+    assert low == 0.0 and high == pytest.approx(report["max_pressure_Pa"], rel=1e-9)
+
+    eye, centre, up = (np.asarray(v) for v in plotter.camera_position)
+    assert eye[1] < centre[1] and np.allclose(up, [0.0, 0.0, 1.0])  # from -y, z up: x runs to the right
+    assert eye[2] > centre[2]  # from above: the skin is where the contact is
+
+    render.render_mesh(mesh, "unused.png", title="pad")
+    eye, centre, _ = (np.asarray(v) for v in caught[-1].camera_position)
+    assert eye[1] < centre[1] and eye[2] < centre[2]  # from -y and below: the bonded base shows
