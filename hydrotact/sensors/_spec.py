@@ -396,20 +396,14 @@ def calc_sensor_surface(spec: SensorSpec) -> tuple[np.ndarray, np.ndarray]:
 
 def _first_exits(origins, directions, vertices, faces, tolerance):
     """Where each ray origins[i] + t directions[i] (t > tolerance) first meets the
-    surface (Möller-Trumbore over every triangle, numpy), NaN where it meets none."""
+    surface (the taxels' Möller-Trumbore test, every ray against every triangle), NaN
+    where it meets none."""
+    from ..taxel import intersect_ray_triangle
+
     triangles = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]
-    a, e1, e2 = triangles[:, 0], triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]
-    h = np.cross(directions[:, None, :], e2[None])  # (rays, triangles, 3)
-    det = np.einsum("rti,ti->rt", h, e1)
-    ok = np.abs(det) > 1e-300
-    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-    s = origins[:, None, :] - a[None]
-    u = np.einsum("rti,rti->rt", s, h) * inv
-    q = np.cross(s, e1[None])
-    v = np.einsum("ri,rti->rt", directions, q) * inv
-    t = np.einsum("ti,rti->rt", e2, q) * inv
-    hit = ok & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t > tolerance)
-    nearest = np.where(hit, t, np.inf).min(axis=1)
+    corners = [triangles[:, k].T[:, None, :] for k in range(3)]  # (3, 1, triangles) each
+    hit, t, _, _ = intersect_ray_triangle(np.asarray(origins, dtype=np.float64).T[:, :, None], np.asarray(directions, dtype=np.float64).T[:, :, None], *corners)
+    nearest = np.where(np.asarray(hit) & (np.asarray(t) > tolerance), np.asarray(t), np.inf).min(axis=1)
     return np.where(np.isfinite(nearest)[:, None], origins + np.where(np.isfinite(nearest), nearest, 0.0)[:, None] * directions, np.nan)
 
 
