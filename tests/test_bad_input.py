@@ -279,6 +279,8 @@ def inputs(tmp_path_factory):
         change(document)
         _json(d / f"sensor_{name}.json", document)
 
+    sensor("copy", lambda s: s.update(name="pad5x5-copy"))  # another cast of the same design
+    _variant(elastic, d / "elastic_copy.parquet", {name: elastic.columns[name] * 1.01 for name in channels}, metadata={"sensor": str(d / "sensor_copy.json")})
     sensor("time_taxel", lambda s: s["taxels"][3].update(name="time"))
     sensor("axis_out", lambda s: s["taxels"][3].update(axis=[0, 0, -1]))
     sensor("axis_zero", lambda s: s["taxels"][3].update(axis=[0, 0, 0]))
@@ -515,6 +517,7 @@ CASES = [
     ("log-twice-two-formats", "fit {d}/elastic.parquet {d}/elastic.csv -o fit", REFUSED, ["elastic.csv", "same samples as"]),
     ("log-unknown-sensor", "fit {d}/other_sensor.parquet -o fit", REFUSED, ["other_sensor.parquet", "sensor: 'nosuch' is neither a built-in sensor"]),
     ("log-bad-probe", "fit {d}/bad_probe.parquet -o fit", REFUSED, ["bad_probe.parquet", "probe:", "unknown probe 'cube:a=1'"]),
+    ("fit-two-sensors", "fit {d}/elastic.parquet {d}/elastic_copy.parquet -o fit --terms 0", WARNED, ["2 sensors (pad5x5, ", "sensor_copy.json)", "same elastomer"]),
     ("log-swapped-channel-names", "fit {d}/swapped.parquet -o fit --terms 0", WARNED, ["reduced χ²", "channel names"]),
     ("log-nan", "fit {d}/nan.parquet -o fit", REFUSED, ["nan.parquet", "column 'b00', row 5: missing value"]),
     ("log-time-backwards", "fit {d}/backwards.parquet -o fit", REFUSED, ["backwards.parquet", "column 'time', row 2", "goes back"]),

@@ -125,6 +125,12 @@ def fit_logs(
                 "(name an existing spec in the log's metadata, relative to this folder), or fit --lumped"
             )
         log_probe(log, str(path))
+    sensors = list(dict.fromkeys(log.metadata["sensor"] for log in logs))
+    if len(sensors) > 1 and report_warning is not None:  # each sensor keeps its own gains; the material is one
+        report_warning(
+            f"the logs come from {len(sensors)} sensors ({', '.join(sensors)}): one material is fitted to all of them, right only if they are cast "
+            "from the same elastomer (fit each sensor on its own otherwise)"
+        )
     if tare:
         logs = [tare_log(log, source=str(path))[0] for log, path in zip(logs, paths)]
     for log, path in zip(logs, paths):
