@@ -284,3 +284,28 @@ def test_schema_document():
     for name, definition in schema["$defs"].items():
         assert definition.get("title") and definition.get("description"), name
     assert schema["properties"]["pressure"]["enum"] == ["elastic", "tared", "absolute"]
+
+
+VISCOELASTIC = {"modulus_Pa": 1.5e6, "long_term_modulus_Pa": 1e6, "prony_terms": [{"modulus_Pa": 5e5, "tau_s": 0.5}]}
+UNDERSHOOT = np.array([0.0, 8e3, 6e3, -1.2e3, -0.4e3])  # a press, a fast release: the linear model dips below zero
+
+
+@pytest.mark.parametrize("material", [VISCOELASTIC, None], ids=["viscoelastic", "material-not-said"])
+def test_a_viscoelastic_release_may_read_below_zero(material):
+    """The linear viscoelastic model reads below zero after a fast release (less than
+    the load it follows): a simulated log of it is read, as `simulate` writes it."""
+    metadata = _metadata(material=material) if material else {k: v for k, v in _metadata().items() if k != "material"}
+    check_log(_log(metadata, b01=UNDERSHOOT), "log.parquet")
+
+
+@pytest.mark.parametrize(
+    ("material", "values", "fragments"),
+    [
+        ({"modulus_Pa": 1e6}, UNDERSHOOT, ["'b01'", "row 4", "-1200 Pa is negative", "an elastic material pushes"]),
+        (VISCOELASTIC, -UNDERSHOOT, ["'b01'", "row 2", "-8000 Pa is negative", "outweighs its peak, 1200 Pa", "sign flipped"]),
+        ({"modulus_Pa": 1e6}, -UNDERSHOOT, ["'b01'", "row 2", "-8000 Pa is negative"]),
+    ],
+    ids=["elastic-undershoot", "viscoelastic-flipped", "elastic-flipped"],
+)
+def test_elastic_pressures_of_the_wrong_sign_are_refused(tmp_path, material, values, fragments):
+    _assert_refused(tmp_path, _log(_metadata(material=material), b01=values), fragments)

@@ -82,7 +82,7 @@ def _unit_hint(value: float, low: float, high: float) -> str:
 def _check_pressures(log: BarometerLog, source: str, spec=None) -> None:
     """Readings a barometer can give: absolute ones positive and within the part's
     range (or, for a sensor we do not know, near the atmosphere), elastic ones
-    (simulated elastomer pressure) never negative, none beyond 10 MPa."""
+    (simulated elastomer pressure) of the right sign, none beyond 10 MPa."""
     reference = log.metadata["pressure"]
     low, high = (float(v) for v in spec.part.range_pa) if spec is not None else ABSOLUTE_RANGE_PA
     part = f"the {spec.part.name}'s range" if spec is not None else "the range of a barometer in air"
@@ -102,13 +102,32 @@ def _check_pressures(log: BarometerLog, source: str, spec=None) -> None:
                 raise HydrotactError(
                     f"{source}: column {label}, row {row + 1}: {values[row]:.6g} Pa is outside {part}, {low:g}-{high:g} Pa{_unit_hint(values[row], low, high)}"
                 )
-        negative = values < -NEGATIVE_ROUND_OFF * max(float(np.max(np.abs(values), initial=0.0)), 1.0)  # not the round-off of a relaxed hereditary integral
-        if reference == "elastic" and np.any(negative):
-            row = int(np.flatnonzero(negative)[0])
-            raise HydrotactError(
-                f"{source}: column {label}, row {row + 1}: elastic pressure {values[row]:g} Pa is negative (the elastomer pushes, never pulls); "
-                "a barometer reading minus its baseline is pressure: tared"
-            )
+        if reference == "elastic":
+            _check_elastic_sign(log, values, label, source)
+
+
+def _check_elastic_sign(log: BarometerLog, values: np.ndarray, label: str, source: str) -> None:
+    """Refuse elastomer pressures of the wrong sign. Under a purely elastic material the
+    elastomer only pushes: any pressure below round-off is wrong. Under a viscoelastic
+    one (the log's material has Prony terms, or is not said) the linear model reads
+    below zero for a few τ after a fast release, by at most (E(0) - E∞) / E(0) of the
+    load it remembers, so less than the channel's peak: a channel whose deepest dip
+    outweighs its peak has its sign flipped."""
+    peak, dip = float(np.max(values, initial=0.0)), float(-np.min(values, initial=0.0))
+    material = log.metadata.get("material")
+    elastic = isinstance(material, dict) and not material.get("prony_terms")
+    negative = dip > NEGATIVE_ROUND_OFF * max(peak, dip, 1.0) if elastic else dip > peak
+    if negative:
+        row = int(np.argmin(values))
+        why = (
+            "the elastomer of an elastic material pushes, never pulls"
+            if elastic
+            else f"its deepest dip outweighs its peak, {peak:g} Pa: a viscoelastic release reads below zero by less than the load it follows"
+        )
+        raise HydrotactError(
+            f"{source}: column {label}, row {row + 1}: elastic pressure {values[row]:g} Pa is negative ({why}); "
+            "is the channel's sign flipped? A barometer reading minus its baseline is pressure: tared"
+        )
 
 
 def _check_time_unit(log: BarometerLog, source: str, spec=None) -> None:
