@@ -274,14 +274,14 @@ def test_simulated_barometer_log(simulated):
     quiet = readings[log.times < 0.9]
     np.testing.assert_allclose(quiet.mean(axis=0), 101325.0 + offsets, atol=0.5)
     np.testing.assert_allclose(quiet.std(axis=0), 0.5, rtol=0.3)
-    # The pressed taxels rise by tens of kPa (E0 = 0.8 MPa, 0.4 mm deep); the rest stay quiet.
+    # The pressed taxels rise by over 10 kPa (E0 = 0.2 MPa, 0.4 mm deep); the rest stay quiet.
     rise = readings.max(axis=0) - readings.min(axis=0)
     pressed = [meta["channels"].index(name) for name in ("b22", "b23")]
     assert np.all(rise[pressed] > 1e4), rise
     assert np.all(np.delete(rise, pressed) < 10.0), rise
     # Load-cell noise on the forces: before the press they read noise of 5 mN.
     np.testing.assert_allclose(log.columns["fz"][log.times < 0.9].std(), 0.005, rtol=0.3)
-    assert log.columns["fz"].min() < -0.1
+    assert log.columns["fz"].min() < -0.05  # the press: about 0.07 N into E0 = 0.2 MPa (force is linear in E), 10 noise stds
 
 
 def test_full_fit_recovers_the_material_and_gains(simulated, full_fit):
