@@ -55,6 +55,9 @@ from ._material import (
 from ._material import (
     write_material as write_material,
 )
+from ._table import (
+    sensor_spec as sensor_spec,
+)
 from ._tare import (
     estimate_noise as estimate_noise,
 )

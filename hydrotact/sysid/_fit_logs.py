@@ -15,8 +15,7 @@ import numpy as np
 
 from .._errors import HydrotactError
 from .._files import check_output
-from ..data import LogWarning, read_log, tare_log
-from ..data._table import sensor_spec
+from ..data import LogWarning, read_log, sensor_spec, tare_log
 from ._fit import CHI_SQUARE_WARNING, MAX_AUTO_TERMS, fit_auto, fit_problem
 from ._problem import check_pose_columns, find_clipped_readings, log_probe, make_fit_problem
 from ._report import write_fit_outputs

@@ -42,7 +42,7 @@ _SILENT_FRACTION = 1e-3
 def find_clipped_readings(log, channels) -> np.ndarray:
     """(T, C) readings of an absolute log at or beyond its part's range (the part
     clips there: the pressure behind the reading is unknown), for a known sensor."""
-    from ..data._table import sensor_spec
+    from ..data import sensor_spec
 
     spec = sensor_spec(log.metadata.get("sensor", ""))
     if spec is None or log.metadata.get("pressure") != "absolute":
