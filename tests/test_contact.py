@@ -126,6 +126,25 @@ def test_broad_phase_matches_brute_force_soft_rigid():
         _assert_same_surface(calc_soft_rigid_surface(field, probe, X, Capacity(1024, 256, 8192), clusters=clusters), brute)
 
 
+def test_broad_phase_at_the_first_cluster_counts_its_tets_once():
+    """A press near the corner where the Morton order starts meets cluster 0. The
+    cluster search's empty slots point at cluster 0 too: their tets once counted as
+    near, once per empty slot, so such a press needed more tets than the mesh has
+    (the buffers grew until memory ran out) and, with room, duplicated cluster 0's
+    polygons. Found by the dataset generator (tilted presses near sphere8's base)."""
+    field = make_pressure_field(mesh := make_seed_mesh("pad5x5", 1.1e-3), calc_distance_field(mesh), E)
+    probe = make_cylinder_probe(2e-3, length=3e-3, num_sides=12)
+    clusters = make_tet_clusters(field.vertices, field.tets, cluster_size=16)
+    X = make_pose([-6.2e-3, -6.2e-3, 0.3e-3])  # the cylinder cuts the pad's corner edge at its base
+    first = np.asarray(field.vertices)[np.asarray(field.tets)[np.asarray(clusters.members)[0]]].reshape(-1, 3)
+    assert np.all(first.min(axis=0) < np.array([-4.2e-3, -4.2e-3, 3.3e-3]))  # cluster 0 lies in the probe's box
+    brute = calc_soft_rigid_surface(field, probe, X, brute_force=True)
+    assert float(brute.total_area) > 0.0
+    culled = calc_soft_rigid_surface(field, probe, X, Capacity(1024, 256, 8192), clusters=clusters)
+    assert int(culled.needed[0]) < field.tets.shape[0]
+    _assert_same_surface(culled, brute)
+
+
 def test_broad_phase_matches_brute_force_half_space_and_soft_soft():
     mesh, field = _ball_field(5e-3, 2)
     X = make_pose([0.2e-3, 0.0, 3.9e-3], [0.2, 0.0, 0.0])

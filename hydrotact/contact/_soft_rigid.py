@@ -275,8 +275,12 @@ def calc_soft_rigid_surface(
         region_hi = jnp.minimum(soft_hi, jnp.max(jnp.where(touching, tri_hi, -big), axis=0))
         # Tets near the other body: clusters first, then their tets, compacted.
         num_cluster_slots = max(1, CLUSTER_SEARCH * capacity.tets // cluster_size)
-        hit, _, num_hit = compact_indices(boxes_overlap(cluster_lo, cluster_hi, region_lo[None], region_hi[None]), num_cluster_slots)
-        candidates = members[jnp.maximum(hit, 0)].reshape(-1)
+        hit, hit_valid, num_hit = compact_indices(boxes_overlap(cluster_lo, cluster_hi, region_lo[None], region_hi[None]), num_cluster_slots)
+        # An empty slot holds index 0 (jnp.maximum): its members must not count, or
+        # cluster 0's tets would be found once per empty slot whenever cluster 0 is
+        # near the probe (a press near the corner of the mesh's box where the Morton
+        # order starts), duplicating their polygons.
+        candidates = jnp.where(hit_valid[:, None], members[jnp.maximum(hit, 0)], -1).reshape(-1)
         safe_candidates = jnp.maximum(candidates, 0)
         candidate_boxes = tet_rows[:, TET_LO : TET_HI + 3][safe_candidates]  # the boxes only; whole rows for the near tets
         near_mask = (candidates >= 0) & boxes_overlap(candidate_boxes[:, :3], candidate_boxes[:, 3:], region_lo[None], region_hi[None])
