@@ -13,6 +13,8 @@ Stages, one sub-package each, in pipeline order:
   `simulate`; `simulate_log` for a log without files.
 - `hydrotact.data`: barometer logs (Parquet, CSV, column mappings), tare, materials.
 - `hydrotact.sysid`: fitting materials, gains and offsets to logs, with uncertainties.
+- `hydrotact.datasets`: synthetic training datasets (the contact-estimation
+  data-collection regime), sharded, resumable, on every local device or on Ray.
 
 `hydrotact.viz` draws (renders and plots) and `hydrotact.cli` is the `hydrotact`
 command; no stage imports either. Units are SI throughout (m, Pa, N, s, rad).

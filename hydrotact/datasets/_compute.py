@@ -1,0 +1,167 @@
+"""Unit responses of many poses, on every local JAX device or on a Ray cluster (host).
+
+The expensive, embarrassingly parallel part of a dataset: one
+:func:`hydrotact.sim.calc_unit_response` per distinct pose. Both engines give the same
+bits for the same poses, because what a pose is computed with depends on the poses
+alone, never on the number of devices or workers:
+
+- a batch is cut into slices of `CHUNK` poses (the last one padded with its last
+  pose), and every call computes one slice per device: one compiled program of one
+  shape on one device, four, or a Ray worker;
+- each slice starts from the same buffer sizes (:data:`START_CAPACITY`) and, while
+  any of its poses overflows, is computed again with the buffers grown to what its
+  overflowing poses needed (:meth:`hydrotact._buffers.AbstractCapacity.grown_to`).
+  So a slice's capacity is a function of its poses, and a slice of easy poses is not
+  made to pay for a hard one elsewhere in the batch (a tilted press near the base of
+  a curved sensor can need 20x the buffers of a press on top).
+
+Locally each device gets one slice at a time, all dispatched at once (JAX runs them
+concurrently): every device runs the same single-device program. Not `shard_map` over a
+device mesh: its partitioned program is fused differently from the one-device program,
+and the centre of pressure then differed in the last bit with four host devices
+(measured), so the shards were not byte-identical. On Ray (`ray_address`), a batch's
+slices are sent in blocks as Ray tasks, each run by the local engine of its worker.
+"""
+
+import dataclasses
+import functools
+
+import equinox as eqx
+import jax
+import numpy as np
+
+from ..contact import make_pose, map_over_poses
+from ..sim import SimCapacity, UnitResponse, calc_unit_response
+
+CHUNK = 64
+"""Poses per slice: per device per call (a multiple of the contact stage's CPU pose group)."""
+
+RAY_SLICES = 4
+"""Slices per Ray task."""
+
+START_CAPACITY = SimCapacity(tets=1024, others=1536, pairs=8192, polygons=2048, taxel_pairs=4096, taxel_pieces=8192)
+"""The buffers every slice starts from: enough for most presses of a 3 mm sphere on the
+built-in sensors (measured), so that few slices compile or compute twice."""
+
+_FIELDS = tuple(field.name for field in dataclasses.fields(UnitResponse))
+
+
+@functools.lru_cache(maxsize=16)
+def _kernel(capacity: SimCapacity):
+    @eqx.filter_jit
+    def kernel(model, probe, rows):
+        X_SR = jax.vmap(make_pose)(rows[:, :3], rows[:, 3:])
+        return map_over_poses(lambda X: calc_unit_response(model, probe, X, capacity), X_SR)
+
+    return kernel
+
+
+def _rounded(capacity: SimCapacity) -> SimCapacity:
+    """Every buffer rounded up to a power of two: few distinct capacities, so few
+    compilations (each new one compiles the kernels again, ~20 s on a laptop CPU)."""
+    return SimCapacity(*(1 << (int(size) - 1).bit_length() for size in capacity.sizes))
+
+
+def _slices(rows: np.ndarray) -> np.ndarray:
+    """(S, CHUNK, 6): the rows cut into slices, the last padded with its last pose."""
+    count = len(rows)
+    index = np.minimum(np.arange(-(-count // CHUNK) * CHUNK), count - 1)
+    return rows[index].reshape(-1, CHUNK, rows.shape[1])
+
+
+def compute_slices(model, probe, slices: np.ndarray, num_devices: int | None = None) -> dict:
+    """Unit responses (a dict of NumPy arrays (S, CHUNK, ...), UnitResponse's fields)
+    of the pose slices (S, CHUNK, 6), each slice grown on its own from
+    START_CAPACITY until none of its poses overflows, one slice per device at a time."""
+    devices = jax.local_devices()[: num_devices or len(jax.local_devices())]
+    placed = [(jax.device_put(model, device), jax.device_put(probe, device)) for device in devices]
+    count = len(slices)
+    capacities = [START_CAPACITY] * count
+    results: list = [None] * count
+    pending = list(range(count))
+    while pending:
+        groups: dict = {}
+        for s in pending:
+            groups.setdefault(capacities[s], []).append(s)
+        pending = []
+        for capacity, members in groups.items():
+            kernel = _kernel(capacity)
+            for start in range(0, len(members), len(devices)):
+                batch = members[start : start + len(devices)]
+                # One slice per device, dispatched asynchronously: they run at once.
+                units = [kernel(*placed[k], jax.device_put(slices[s], devices[k])) for k, s in enumerate(batch)]
+                for s, unit in zip(batch, units):
+                    arrays = {name: np.asarray(getattr(unit, name)) for name in _FIELDS}
+                    overflow = arrays["did_overflow"]
+                    if overflow.any():
+                        capacities[s] = _rounded(capacity.grown_to(arrays["needed"][overflow]))
+                        pending.append(s)
+                    else:
+                        results[s] = arrays
+    return {name: np.stack([result[name] for result in results]) for name in _FIELDS}
+
+
+def compute_block(model, probe, rows: np.ndarray, num_devices: int | None = None) -> dict:
+    """Unit responses (a dict of NumPy arrays, UnitResponse's fields, leading axis n)
+    of pose `rows` (n, 6), on `num_devices` local devices (all by default)."""
+    rows = np.asarray(rows, dtype=np.float64)
+    result = compute_slices(model, probe, _slices(rows), num_devices)
+    return {name: values.reshape(-1, *values.shape[2:])[: len(rows)] for name, values in result.items()}
+
+
+def _ray_task(model, probe, slices, x64):
+    jax.config.update("jax_enable_x64", bool(x64))
+    return compute_slices(model, probe, slices)
+
+
+class PoseEngine:
+    """Computes unit responses of pose batches, in-process or on Ray (see the module).
+
+    `ray_address`: None (in-process, every local device), "auto" (the running
+    cluster) or a cluster's address."""
+
+    def __init__(self, model, probe, ray_address: str | None = None):
+        self.model, self.probe = model, probe
+        self.ray_address = ray_address
+        self._remote = None
+        if ray_address is not None:
+            self._connect(ray_address)
+
+    @property
+    def description(self) -> str:
+        if self._remote is not None:
+            import ray
+
+            return f"Ray cluster at {self.ray_address} ({int(ray.cluster_resources().get('CPU', 0))} CPUs)"
+        devices = jax.local_devices()
+        return f"{len(devices)} local {devices[0].platform.upper()} device{'s' if len(devices) > 1 else ''}"
+
+    def _connect(self, address: str) -> None:
+        from .._errors import HydrotactError
+
+        try:
+            import ray
+        except ImportError:
+            raise HydrotactError("--ray: Ray is not installed; pip install 'hydrotact[ray]' (or run without --ray: every local device is used)") from None
+        if not ray.is_initialized():
+            try:
+                ray.init(address=address, logging_level="ERROR", log_to_driver=False)
+            except (ConnectionError, RuntimeError, ValueError) as error:
+                raise HydrotactError(f"--ray {address}: cannot connect to a Ray cluster ({error}); start one with 'ray start --head', or run without --ray") from None
+        host = lambda tree: jax.tree_util.tree_map(lambda leaf: np.asarray(leaf) if eqx.is_array(leaf) else leaf, tree)
+        self._model_ref, self._probe_ref = ray.put(host(self.model)), ray.put(host(self.probe))
+        self._remote = ray.remote(num_cpus=1)(_ray_task)
+
+    def compute(self, rows: np.ndarray) -> dict:
+        """Unit responses of the batch `rows` (n, 6) (a dict of NumPy arrays with
+        UnitResponse's fields, leading axis n)."""
+        rows = np.asarray(rows, dtype=np.float64)
+        if self._remote is None:
+            return compute_block(self.model, self.probe, rows)
+        import ray
+
+        x64 = bool(jax.config.read("jax_enable_x64"))
+        slices = _slices(rows)
+        futures = [self._remote.remote(self._model_ref, self._probe_ref, slices[start : start + RAY_SLICES], x64) for start in range(0, len(slices), RAY_SLICES)]
+        pieces = ray.get(futures)
+        return {name: np.concatenate([piece[name] for piece in pieces]).reshape(-1, *pieces[0][name].shape[2:])[: len(rows)] for name in _FIELDS}

@@ -1,0 +1,241 @@
+"""One continuous data-collection session: approach marches, the timeline, and the
+samples with their labels (host around pure kernels).
+
+Each event approaches its skin point along its drawn direction at its drawn speed,
+one sample per 1/rate. The approaches of all events march together in rounds of
+`ROUND_SAMPLES` samples (one batch of unit responses per round): after each round an
+event whose elastic normal force E(0) u_n(s) has reached its target stops, and its
+hold depth is interpolated linearly between its last two samples (the approach
+samples find the depth; there is no separate search). The holds (one pose each) are
+computed last. The retract retraces the approach's poses in reverse.
+
+Then the session's timeline is laid out (gap, approach, hold, retract per event) and
+the whole of it goes through :func:`hydrotact.sim.calc_samples` at once: the
+hereditary integral runs over the session, so the residual stress of one event is
+still there in the next, as on a real gantry; then the barometer signal.
+"""
+
+import dataclasses
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._files import atomic_path
+from ..sim import UnitResponse, calc_samples
+from ._config import PHASES, DatasetConfig
+from ._events import EventPlan
+
+ROUND_SAMPLES = 8
+"""Approach samples per event per round of the march."""
+
+FAR_ROW = np.array([0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
+"""The probe's pose between events: a metre above the sensor (no contact)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Presses:
+    """The outcome of the march: a table of distinct poses (`rows` (P, 6) and their
+    unit responses `table`, a dict of UnitResponse fields), per event the table
+    indices of its approach samples (`approach`, a list of arrays), of its hold pose
+    (`hold` (N,)), its approach `depths` (list of arrays, m past the skin point) and
+    `hold_depths` (N,), whether the target was `reached` (N,), the elastic force at
+    the hold `hold_forces` (N,), N; `far` the index of the no-contact pose."""
+
+    rows: np.ndarray
+    table: dict
+    approach: list
+    depths: list
+    hold: np.ndarray
+    hold_depths: np.ndarray
+    reached: np.ndarray
+    hold_forces: np.ndarray
+    far: int
+
+
+def _pose_rows(plan: EventPlan, events: np.ndarray, depths: np.ndarray) -> np.ndarray:
+    tips = plan.points[events] + depths[:, None] * plan.directions[events]
+    return np.column_stack([tips, plan.rotation_vectors[events]])
+
+
+def _normal_forces(table: dict, index: np.ndarray, modulus: float) -> np.ndarray:
+    return modulus * np.sum(table["force_S"][index] * table["normal_S"][index], axis=1)
+
+
+class _Rounds:
+    """Batches of poses, each computed once: looked up in the run's checkpoint folder
+    (`round-NNNN.npz`, the rows must match exactly) or computed and saved there."""
+
+    def __init__(self, engine, folder: Path | None, on_poses=None):
+        self.engine, self.folder, self.on_poses = engine, folder, on_poses
+        self.rows, self.parts, self.count = [], [], 0
+
+    def add(self, rows: np.ndarray) -> np.ndarray:
+        """Compute (or load) a batch; the table indices of its rows."""
+        number = len(self.rows)
+        path = None if self.folder is None else self.folder / f"round-{number:04d}.npz"
+        result = None
+        if path is not None and path.is_file():
+            try:
+                with np.load(path, allow_pickle=False) as saved:
+                    if saved["rows"].shape == rows.shape and np.array_equal(saved["rows"], rows):
+                        result = {name: saved[name] for name in saved.files if name != "rows"}
+            except (OSError, ValueError, KeyError, EOFError):
+                result = None  # unreadable: compute again
+        if result is None:
+            result = self.engine.compute(rows)
+            if path is not None:
+                with atomic_path(path, suffix=".npz") as tmp:
+                    np.savez(tmp, rows=rows, **result)
+        if self.on_poses is not None:
+            self.on_poses(len(rows))
+        self.rows.append(rows)
+        self.parts.append(result)
+        index = np.arange(self.count, self.count + len(rows))
+        self.count += len(rows)
+        return index
+
+    def table(self) -> tuple[np.ndarray, dict]:
+        names = self.parts[0].keys()
+        return np.concatenate(self.rows), {name: np.concatenate([part[name] for part in self.parts]) for name in names}
+
+
+def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float, folder: Path | None = None, on_poses=None, on_round=None) -> Presses:
+    """March every event's approach until its target force (see the module), then
+    compute the holds and the no-contact pose. `folder` keeps each round's responses
+    (resumable); `on_poses(n)` after each batch of n poses; `on_round(active,
+    remaining_estimate)` after each round."""
+    count = plan.num_events
+    steps = plan.speeds / config.rate_hz
+    limits = np.floor((config.max_depth + config.clearance) / steps + 1e-9).astype(np.int64) + 1  # samples up to max_depth
+    rounds = _Rounds(engine, folder, on_poses)
+    index_of = [[] for _ in range(count)]  # table index per approach sample so far
+    forces = [[] for _ in range(count)]
+    done = np.zeros(count, dtype=bool)
+    first_above = np.full(count, -1)  # the first sample at or above the target
+    start = 0
+    while not done.all():
+        active = np.flatnonzero(~done)
+        stops = np.minimum(start + ROUND_SAMPLES, limits[active])
+        lengths = np.maximum(stops - start, 0)
+        events = np.repeat(active, lengths)
+        k = np.concatenate([np.arange(start, stop) for stop in stops]) if len(events) else np.zeros(0, np.int64)
+        depths = -config.clearance + k * steps[events]
+        if len(events):
+            index = rounds.add(_pose_rows(plan, events, depths))
+            force = _normal_forces(rounds.parts[-1], np.arange(len(events)), modulus)
+            offset = 0
+            for event, length in zip(active.tolist(), lengths.tolist()):
+                index_of[event] += index[offset : offset + length].tolist()
+                forces[event] += force[offset : offset + length].tolist()
+                offset += length
+        for event in active.tolist():
+            above = np.flatnonzero(np.asarray(forces[event][start:]) >= plan.target_forces[event])
+            if above.size:
+                first_above[event] = start + int(above[0])
+                done[event] = True
+            elif start + ROUND_SAMPLES >= limits[event]:
+                done[event] = True
+        start += ROUND_SAMPLES
+        if on_round is not None:
+            on_round(int((~done).sum()), count)
+    reached = first_above >= 0
+    hold_depths = np.empty(count)
+    approach, depths = [], []
+    for event in range(count):
+        step = steps[event]
+        if reached[event]:
+            j = int(first_above[event])
+            if j == 0:
+                hold_depths[event] = -config.clearance
+            else:
+                low, high = forces[event][j - 1], forces[event][j]
+                fraction = (plan.target_forces[event] - low) / (high - low) if high > low else 1.0
+                hold_depths[event] = -config.clearance + (j - 1 + float(np.clip(fraction, 0.0, 1.0))) * step
+            used = j
+        else:  # the target lies deeper than max_depth: hold at the last sample
+            used = int(limits[event]) - 1
+            hold_depths[event] = -config.clearance + used * step
+        approach.append(np.asarray(index_of[event][:used], dtype=np.int64))
+        depths.append(-config.clearance + np.arange(used) * step)
+    holds = rounds.add(np.vstack([_pose_rows(plan, np.arange(count), hold_depths), FAR_ROW[None]]))
+    rows, table = rounds.table()
+    return Presses(
+        rows=rows, table=table, approach=approach, depths=depths, hold=holds[:count], hold_depths=hold_depths, reached=reached,
+        hold_forces=_normal_forces(table, holds[:count], modulus), far=int(holds[count]),
+    )
+
+
+@dataclasses.dataclass(frozen=True)
+class Timeline:
+    """Per sample of the session: `pose` (the table index), `event` (-1 in gaps),
+    `phase` (:data:`PHASES`), `depth` (m past the event's skin point; NaN in gaps);
+    `event_starts` (N + 1,) the first sample of each event's gap (and the end)."""
+
+    pose: np.ndarray
+    event: np.ndarray
+    phase: np.ndarray
+    depth: np.ndarray
+    event_starts: np.ndarray
+
+    @property
+    def num_samples(self) -> int:
+        return len(self.pose)
+
+
+def lay_out_timeline(plan: EventPlan, presses: Presses, config: DatasetConfig) -> Timeline:
+    """The session: per event a gap, the approach, the hold and the retract; a last gap."""
+    pose, event, phase, depth, starts = [], [], [], [], []
+    total = 0
+
+    def append(poses, number, code, depths):
+        nonlocal total
+        pose.append(np.asarray(poses, dtype=np.int64))
+        event.append(np.full(len(poses), number, dtype=np.int32))
+        phase.append(np.full(len(poses), code, dtype=np.int8))
+        depth.append(np.asarray(depths, dtype=np.float64))
+        total += len(poses)
+
+    def gap(seconds):
+        n = max(1, int(round(seconds * config.rate_hz)))
+        append(np.full(n, presses.far), -1, PHASES["gap"], np.full(n, np.nan))
+
+    for e in range(plan.num_events):
+        starts.append(total)
+        gap(plan.gaps[e])
+        append(presses.approach[e], e, PHASES["approach"], presses.depths[e])
+        n = max(1, int(round(plan.holds[e] * config.rate_hz)))
+        append(np.full(n, presses.hold[e]), e, PHASES["hold"], np.full(n, presses.hold_depths[e]))
+        append(presses.approach[e][::-1], e, PHASES["retract"], presses.depths[e][::-1])
+    gap(config.gap_range[1])
+    starts.append(total)
+    return Timeline(np.concatenate(pose), np.concatenate(event), np.concatenate(phase), np.concatenate(depth), np.asarray(starts, dtype=np.int64))
+
+
+_calc_samples = eqx.filter_jit(calc_samples)
+
+
+def run_session(model, material, presses: Presses, timeline: Timeline, config: DatasetConfig, signal, key) -> dict:
+    """The session's samples and labels as columns (NumPy arrays; see the manifest's
+    column list): the whole timeline through the viscoelastic response and the
+    barometer signal in one pure call."""
+    times = np.arange(timeline.num_samples) / config.rate_hz
+    unit = UnitResponse(**{name: jnp.asarray(values[timeline.pose]) for name, values in presses.table.items()})
+    samples = _calc_samples(model, material, jnp.asarray(times), unit, signal, key)
+    samples = jax.tree_util.tree_map(np.asarray, samples)
+    touching = np.asarray(samples.unit.area) > 0.0
+    columns = {"time": times}
+    return columns | {
+        "readings": samples.readings,
+        "fx": samples.force_S[:, 0], "fy": samples.force_S[:, 1], "fz": samples.force_S[:, 2],
+        "fn": samples.normal_force, "theta": samples.theta, "phi": samples.phi,
+        "contact": samples.contact.astype(np.int8),
+        "cop_x": np.where(touching, samples.unit.contact_point_S[:, 0], np.nan),
+        "cop_y": np.where(touching, samples.unit.contact_point_S[:, 1], np.nan),
+        "cop_z": np.where(touching, samples.unit.contact_point_S[:, 2], np.nan),
+        "depth": timeline.depth, "event": timeline.event, "phase": timeline.phase,
+        "probe": presses.rows[timeline.pose],
+        "elastic": samples.taxel_pressures,
+    }
