@@ -127,9 +127,13 @@ def _full(folder: Path) -> dict:
     from hydrotact.data import make_material_document, write_material
     from hydrotact.datasets import generate_dataset
 
-    material = write_material(folder / "material.json", make_material_document(6e5, [2.5e5, 1.5e5], [0.8, 12.0], name="benchmark silicone"))
+    material = write_material(folder / "material.json", make_material_document(1.8e6, [7.5e5, 4.5e5], [0.8, 12.0], name="benchmark silicone"))
     start = time.perf_counter()
     manifest = generate_dataset("sphere8", folder / "sphere8_seed_scale", material=material, progress=True)
+    from hydrotact.datasets import load_dataset
+    from hydrotact.viz import plot_dataset
+
+    plot_dataset(load_dataset(folder / "sphere8_seed_scale"), folder / "sphere8_seed_scale")
     elapsed = time.perf_counter() - start
     size = sum(path.stat().st_size for path in (folder / "sphere8_seed_scale").iterdir())
     return {
@@ -138,6 +142,7 @@ def _full(folder: Path) -> dict:
         "peak_rss_GiB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20, "size_MiB": size / 2**20,
         "channel_std_kPa": [round(1e-3 * s, 2) for s in manifest["statistics"]["channel_std_Pa"]],
         "events_short_of_target": manifest["statistics"]["events_short_of_target"],
+        "statistics": manifest["statistics"],
     }
 
 

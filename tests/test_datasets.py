@@ -131,6 +131,30 @@ def test_tilts_stay_within_the_limit_and_fill_the_cone():
     assert stats.kstest((1 - np.cos(angles)) / (1 - np.cos(np.radians(30.0))), "uniform").pvalue > 1e-3
 
 
+def test_approach_thickness_is_the_elastomers_chord():
+    """The thickness along each approach against closed forms: on sphere8 (a sphere of
+    radius 10 mm centred 5 mm above the board z = 0) the chord from the skin point to
+    the sphere or the board, whichever comes first; on pad5x5's top face 4 mm / cos(tilt).
+    Each event's max depth is the smaller of max_depth and the fraction of it."""
+    config = DatasetConfig(events=400, max_tilt_deg=30.0, max_depth=6e-3, max_depth_fraction=0.5)
+    spec = load_sensor("sphere8")
+    plan = sample_events(find_touchable_skin(spec, spec.make_mesh(check=False)), config, np.random.default_rng(8))
+    centre = np.array([0.0, 0.0, 5e-3])
+    d, p = plan.directions, plan.points
+    sphere = -2.0 * np.einsum("ij,ij->i", p - centre, d)
+    board = np.where(d[:, 2] < 0.0, -p[:, 2] / np.minimum(d[:, 2], -1e-300), np.inf)
+    np.testing.assert_allclose(plan.thickness, np.minimum(sphere, board), rtol=0.03, atol=0.2e-3)  # a mesh of 1.2 mm edges
+    assert np.any(board < sphere) and np.any(sphere < board)  # both ways out occur
+    np.testing.assert_array_equal(plan.max_depths, np.minimum(6e-3, 0.5 * plan.thickness))
+    assert np.any(plan.max_depths < 6e-3) and np.any(plan.max_depths == 6e-3)
+
+    spec = load_sensor("pad5x5")
+    plan = sample_events(find_touchable_skin(spec, spec.make_mesh(check=False)), config, np.random.default_rng(9))
+    top = (plan.normals[:, 2] > 0.99) & np.all(np.abs(plan.points[:, :2]) < 6.6e-3 - 4e-3 * np.tan(np.radians(30.0)), axis=1)
+    assert top.sum() > 50
+    np.testing.assert_allclose(plan.thickness[top], 4e-3 / np.cos(plan.tilts[top]), rtol=1e-9)
+
+
 def test_config_refuses_impossible_regimes():
     for kwargs, words in (
         ({"events": 0}, "--events"), ({"force_range": (5.0, 1.0)}, "--force-range"), ({"force_range": (0.0, 8.0)}, "LOW > 0"),
@@ -221,6 +245,9 @@ def test_residual_stress_carries_from_event_to_event():
     presses = march_presses(PoseEngine(model, parse_probe(config.probe)), plan, config, float(material.instantaneous_modulus))
     assert presses.reached.all()
     np.testing.assert_allclose(presses.hold_forces, plan.target_forces, rtol=0.05)  # the hold depth reaches the target force
+    # The march computes few poses past each target (the √F prediction): per event its
+    # approach, the first sample at the target, at most one more, and the hold; and the far pose.
+    assert len(presses.rows) <= sum(len(a) + 3 for a in presses.approach) + 1
     timeline = lay_out_timeline(plan, presses, config)
     columns = run_session(model, material, presses, timeline, config, None, None)
     unit_fz = presses.table["force_S"][timeline.pose, 2]

@@ -6,8 +6,8 @@ the command picks up the unit responses already computed."""
 
 from pathlib import Path
 
-from .._defaults import DEFAULT_MODULUS
-from ._arguments import MODULUS_HELP, number
+from .._defaults import DEFAULT_DATASET_MODULUS
+from ._arguments import number
 from ._output import print_report
 
 
@@ -37,7 +37,10 @@ def add_parser(subparsers):
     )
     parser.add_argument("--sensor", required=True, metavar="S", help="a built-in sensor (pad5x5, sphere8, ellipsoid8) or a sensor JSON file")
     parser.add_argument("--material", type=Path, metavar="MATERIAL.json", help="the elastomer (e.g. from hydrotact fit); default: elastic, --modulus")
-    parser.add_argument("--modulus", type=number, metavar="E", help=MODULUS_HELP + "; without --material")
+    parser.add_argument(
+        "--modulus", type=number, metavar="E",
+        help=f"hydroelastic modulus in Pa, elastic, without --material (default {DEFAULT_DATASET_MODULUS:.0e}: "
+        "reaches the paper's 8 N and its 3-9 kPa channel swing on the curved sensors)".replace("e+0", "e"))
     parser.add_argument("--randomise-material", action="store_true", help="draw the material from MATERIAL.json's covariance (domain randomisation; the draw is in the manifest)")
     parser.add_argument("--events", type=int, default=default("events"), metavar="N", help=f"contact events (default {default('events')}, the paper's)")
     parser.add_argument("--seed", type=int, default=default("seed"), metavar="K", help=f"seed of every draw (default {default('seed')})")
@@ -50,6 +53,9 @@ def add_parser(subparsers):
     parser.add_argument("--hold-range", type=_pair, default=default("hold_range"), metavar="LOW,HIGH", help=f"hold duration, s (default {pair('hold_range')})")
     parser.add_argument("--gap-range", type=_pair, default=default("gap_range"), metavar="LOW,HIGH", help=f"no-contact time before each event, s (default {pair('gap_range')})")
     parser.add_argument("--max-depth", type=number, default=default("max_depth"), metavar="M", help=f"deepest approach past the skin point, m (default {default('max_depth'):g})")
+    parser.add_argument(
+        "--max-depth-fraction", type=number, default=default("max_depth_fraction"), metavar="F",
+        help=f"deepest approach as a fraction of the elastomer's thickness along it (default {default('max_depth_fraction'):g})")
     parser.add_argument("--rate", type=number, default=default("rate_hz"), metavar="HZ", help=f"sample rate (default {default('rate_hz'):g})")
     parser.add_argument("--rays", type=int, default=default("num_rays"), metavar="N", help=f"rays per receptive field (default {default('num_rays')})")
     parser.add_argument("--noise", type=number, metavar="PA", help="barometer RMS noise in Pa (default: the part's)")
@@ -74,12 +80,13 @@ def run(args) -> None:
         raise HydrotactError("--modulus: give either --material or --modulus, not both")
     config = DatasetConfig(
         events=args.events, seed=args.seed, probe=args.probe, force_distribution=args.force_distribution, force_range=args.force_range,
-        max_tilt_deg=args.max_tilt, speed_range=args.speed_range, hold_range=args.hold_range, gap_range=args.gap_range, max_depth=args.max_depth,
+        max_tilt_deg=args.max_tilt, speed_range=args.speed_range, hold_range=args.hold_range, gap_range=args.gap_range,
+        max_depth=args.max_depth, max_depth_fraction=args.max_depth_fraction,
         rate_hz=args.rate, num_rays=args.rays, noise_rms=args.noise, gain_spread=args.gain_spread, offset_spread=args.offset_spread,
         position_jitter=args.position_jitter, randomise_material=args.randomise_material, shard_rows=args.shard_rows, test_fraction=args.test_fraction,
     )
     manifest = generate_dataset(
-        args.sensor, args.output, material=args.material, modulus=DEFAULT_MODULUS if args.material is None and args.modulus is None else args.modulus,
+        args.sensor, args.output, material=args.material, modulus=args.modulus,
         config=config, ray_address=args.ray, progress=not args.json,
     )
     plots = []

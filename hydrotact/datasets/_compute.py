@@ -37,7 +37,7 @@ CHUNK = 64
 """Poses per slice: per device per call (a multiple of the contact stage's CPU pose group)."""
 
 RAY_SLICES = 4
-"""Slices per Ray task."""
+"""The most slices per Ray task (fewer when there are fewer slices than the cluster has CPUs)."""
 
 START_CAPACITY = SimCapacity(tets=1024, others=1536, pairs=8192, polygons=2048, taxel_pairs=4096, taxel_pieces=8192)
 """The buffers every slice starts from: enough for most presses of a 3 mm sphere on the
@@ -162,6 +162,9 @@ class PoseEngine:
 
         x64 = bool(jax.config.read("jax_enable_x64"))
         slices = _slices(rows)
-        futures = [self._remote.remote(self._model_ref, self._probe_ref, slices[start : start + RAY_SLICES], x64) for start in range(0, len(slices), RAY_SLICES)]
+        # At most RAY_SLICES per task, fewer when that leaves a CPU of the cluster idle.
+        cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
+        per_task = max(1, min(RAY_SLICES, -(-len(slices) // cpus)))
+        futures = [self._remote.remote(self._model_ref, self._probe_ref, slices[start : start + per_task], x64) for start in range(0, len(slices), per_task)]
         pieces = ray.get(futures)
         return {name: np.concatenate([piece[name] for piece in pieces]).reshape(-1, *pieces[0][name].shape[2:])[: len(rows)] for name in _FIELDS}

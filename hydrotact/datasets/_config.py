@@ -36,8 +36,9 @@ class DatasetConfig:
     (one speed per event: the retract retraces the approach's poses, so a press costs
     one distinct pose per approach sample plus its hold); `hold_range` and `gap_range`
     (s) the hold and the no-contact time before each event; `clearance` (m) where the
-    approach starts, above the skin point; `max_depth` (m) the deepest an approach
-    goes (an event whose target force is not reached by then holds there, and is
+    approach starts, above the skin point; an approach goes no deeper than
+    `max_depth` (m) nor than `max_depth_fraction` of the elastomer's thickness along
+    its line (an event whose target force is not reached by then holds there, and is
     counted in the manifest); `rate_hz` the sample rate.
 
     **The sensor:** `num_rays` per receptive field; `noise_rms` the barometer noise
@@ -61,7 +62,8 @@ class DatasetConfig:
     hold_range: tuple[float, float] = (0.5, 5.0)
     gap_range: tuple[float, float] = (0.5, 2.0)
     clearance: float = 0.3e-3
-    max_depth: float = 3e-3
+    max_depth: float = 6e-3
+    max_depth_fraction: float = 0.5
     rate_hz: float = 100.0
     num_rays: int = 64
     noise_rms: float | None = None
@@ -125,6 +127,7 @@ def check_config(config: DatasetConfig) -> None:
         ("max_tilt_deg", 0.0, 80.0, "deg"),
         ("clearance", 0.0, 0.05, "m"),
         ("max_depth", 1e-5, 0.05, "m"),
+        ("max_depth_fraction", 0.01, 1.0, ""),
         ("rate_hz", 1.0, 10_000.0, "Hz"),
         ("gain_spread", 0.0, 0.25, ""),
         ("offset_spread", 0.0, 1e5, "Pa"),

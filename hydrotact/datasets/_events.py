@@ -20,11 +20,15 @@ from ._config import DatasetConfig
 @dataclasses.dataclass(frozen=True)
 class Skin:
     """The touchable skin: triangles `corners` (k, 3, 3) m, outward unit `normals`
-    (k, 3) and `areas` (k,) m^2, in the sensor frame S."""
+    (k, 3) and `areas` (k,) m^2, in the sensor frame S; and the elastomer's whole
+    closed boundary (`boundary_vertices` (n, 3), `boundary_faces` (f, 3)), through
+    which an approach's thickness of elastomer is measured."""
 
     corners: np.ndarray
     normals: np.ndarray
     areas: np.ndarray
+    boundary_vertices: np.ndarray
+    boundary_faces: np.ndarray
 
     @property
     def area(self) -> float:
@@ -46,7 +50,24 @@ def find_touchable_skin(spec, mesh) -> Skin:
         keep &= (spec.theta_range[0] <= theta) & (theta <= spec.theta_range[1]) & (spec.phi_range[0] <= phi) & (phi <= spec.phi_range[1])
     if not keep.any():
         raise HydrotactError(f"sensor {spec.name}: no free skin face lies within its contact-angle ranges; nothing to touch")
-    return Skin(corners=corners[keep], normals=cross[keep] / doubled[keep, None], areas=0.5 * doubled[keep])
+    return Skin(
+        corners=corners[keep], normals=cross[keep] / doubled[keep, None], areas=0.5 * doubled[keep],
+        boundary_vertices=np.asarray(mesh.vertices), boundary_faces=np.asarray(mesh.boundary_faces),
+    )
+
+
+def calc_approach_thickness(skin: Skin, points: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """The elastomer's thickness along each approach (m): from the skin point along the
+    unit direction into the elastomer to where the line first leaves it again (the
+    board, the core, or the far side), by casting rays at the closed boundary with the
+    taxels' Möller-Trumbore test."""
+    from ..taxel import calc_first_hits
+
+    skip = 1e-6 * float(np.ptp(skin.boundary_vertices, axis=0).max())  # past the skin point's own face
+    thickness = calc_first_hits(points, directions, skin.boundary_vertices, skin.boundary_faces, skip)
+    if not np.all(np.isfinite(thickness)):
+        raise HydrotactError(f"{int(np.sum(~np.isfinite(thickness)))} approach lines never leave the elastomer: its boundary is not closed")
+    return thickness
 
 
 def sample_skin_points(skin: Skin, count: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -93,7 +114,9 @@ class EventPlan:
     """The drawn events (arrays of length N, frame S, SI units): `points` on the skin
     and its outward `normals`; the approach `directions` (into the skin) and the
     probe's `rotation_vectors`; `tilts` (rad) from the inward normal; `target_forces`
-    (N); `speeds` (m/s); `holds` and `gaps` (s)."""
+    (N); `speeds` (m/s); `holds` and `gaps` (s); `thickness` (m) of elastomer along
+    the approach and `max_depths` (m), the deepest the approach goes: the smaller of
+    `max_depth` and `max_depth_fraction` of the thickness."""
 
     points: np.ndarray
     normals: np.ndarray
@@ -104,6 +127,8 @@ class EventPlan:
     speeds: np.ndarray
     holds: np.ndarray
     gaps: np.ndarray
+    thickness: np.ndarray
+    max_depths: np.ndarray
 
     @property
     def num_events(self) -> int:
@@ -123,6 +148,7 @@ def sample_events(skin: Skin, config: DatasetConfig, rng: np.random.Generator) -
     count = config.events
     points, normals, _ = sample_skin_points(skin, count, rng)
     directions, tilts = _tilt(-normals, np.radians(config.max_tilt_deg), rng)
+    thickness = calc_approach_thickness(skin, points, directions)
     return EventPlan(
         points=points,
         normals=normals,
@@ -133,4 +159,6 @@ def sample_events(skin: Skin, config: DatasetConfig, rng: np.random.Generator) -
         speeds=rng.uniform(*config.speed_range, count),
         holds=rng.uniform(*config.hold_range, count),
         gaps=rng.uniform(*config.gap_range, count),
+        thickness=thickness,
+        max_depths=np.minimum(config.max_depth, config.max_depth_fraction * thickness),
     )

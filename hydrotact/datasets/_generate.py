@@ -17,6 +17,7 @@ import jax
 import numpy as np
 
 from .. import __version__
+from .._defaults import DEFAULT_DATASET_MODULUS
 from .._errors import HydrotactError, HydrotactWarning
 from .._files import digest
 from ._config import PHASES, DatasetConfig
@@ -80,7 +81,7 @@ def _resolve_material(material, modulus, config: DatasetConfig, rng) -> tuple:
     if material is None:
         if config.randomise_material:
             raise HydrotactError("--randomise-material: needs --material (a material document with uncertainties)")
-        value = check_modulus(1e6 if modulus is None else modulus)
+        value = check_modulus(DEFAULT_DATASET_MODULUS if modulus is None else modulus)
         return make_prony(value, source="--modulus"), {"source": "--modulus", "randomised": False, "long_term_modulus_Pa": float(value), "moduli_Pa": [], "taus_s": []}
     if isinstance(material, dict):
         document, source = material, "material document"
@@ -169,7 +170,7 @@ def generate_dataset(sensor, output, *, material=None, modulus=None, config: Dat
     - `sensor`: a :class:`hydrotact.sensors.SensorSpec`, a built-in name or a spec file.
     - `material`: a material document (dict) or its JSON file (drawn from its
       covariance with `config.randomise_material`); without it an elastic material of
-      `modulus` Pa (default 1 MPa).
+      `modulus` Pa (default :data:`hydrotact._defaults.DEFAULT_DATASET_MODULUS`, 3 MPa).
     - `config`: the regime (:class:`DatasetConfig`; the paper's by default).
     - `ray_address`: None to run in this process on every local JAX device; "auto" or
       an address to send the pose batches to a Ray cluster as tasks.
@@ -208,15 +209,15 @@ def generate_dataset(sensor, output, *, material=None, modulus=None, config: Dat
     key = jax.random.PRNGKey(int(noise_rng.integers(2**31)))
     plan = sample_events(find_touchable_skin(spec, spec.make_mesh(check=False)), config, events_rng)
     engine = PoseEngine(model, probe, ray_address)
-    with tqdm(total=plan.num_events * ROUND_ESTIMATE, unit="pose", desc=f"generating {spec.name} ({plan.num_events} events, {engine.description})", disable=not progress) as bar:
+    with tqdm(total=plan.num_events * (ROUND_ESTIMATE + 1) + 1, unit="pose", desc=f"generating {spec.name} ({plan.num_events} events, {engine.description})", disable=not progress) as bar:
         bar.set_postfix_str("compiling the contact kernels", refresh=True)
 
         def on_poses(count):
             bar.set_postfix_str("", refresh=False)
             bar.update(count)
 
-        def on_round(active, total):
-            bar.total = max(bar.n + active * ROUND_ESTIMATE // 2 + total, bar.n + 1)
+        def on_round(active, to_go):
+            bar.total = bar.n + max(to_go, 1)
             bar.refresh()
 
         presses = march_presses(engine, plan, config, float(prony.instantaneous_modulus), folder=partial, on_poses=on_poses, on_round=on_round)
@@ -272,6 +273,7 @@ def generate_dataset(sensor, output, *, material=None, modulus=None, config: Dat
             "fy_N": [float(np.min(columns["fy"])), float(np.max(columns["fy"]))],
             "fn_N": [float(np.min(columns["fn"])), float(np.max(columns["fn"]))],
             "hold_depth_m": [float(presses.hold_depths.min()), float(presses.hold_depths.max())],
+            "max_depth_m": [float(plan.max_depths.min()), float(plan.max_depths.max())],
             "in_contact_hold_fraction": float(contact[hold].mean()) if hold.any() else 0.0,
         },
     }
@@ -293,6 +295,7 @@ def _warn(output, manifest: dict, config: DatasetConfig) -> None:
     if short:
         warnings.warn(HydrotactWarning(
             f"{output}: {short} of {manifest['num_events']} events did not reach their target force within --max-depth {config.max_depth * 1e3:g} mm "
+            f"or --max-depth-fraction {config.max_depth_fraction:g} of the elastomer's thickness "
             f"and hold there (the material is softer than the force range needs; hold forces up to {stats['hold_force_N']['max']:.3g} N)"
         ), stacklevel=3)
     saturated = sum(stats["saturated_samples"])

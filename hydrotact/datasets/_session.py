@@ -2,12 +2,14 @@
 samples with their labels (host around pure kernels).
 
 Each event approaches its skin point along its drawn direction at its drawn speed,
-one sample per 1/rate. The approaches of all events march together in rounds of
-`ROUND_SAMPLES` samples (one batch of unit responses per round): after each round an
-event whose elastic normal force E(0) u_n(s) has reached its target stops, and its
-hold depth is interpolated linearly between its last two samples (the approach
-samples find the depth; there is no separate search). The holds (one pose each) are
-computed last. The retract retraces the approach's poses in reverse.
+one sample per 1/rate, no deeper than its own limit (:attr:`EventPlan.max_depths`).
+The approaches of all events march together in rounds (one batch of unit responses per
+round), each event taking as many samples as its force so far predicts it still needs
+(at most `ROUND_SAMPLES`): after each round an event whose elastic normal force
+E(0) u_n(s) has reached its target stops, and its hold depth is interpolated linearly
+between its last two samples (the approach samples find the depth; there is no
+separate search). The holds (one pose each) are computed last. The retract retraces
+the approach's poses in reverse.
 
 Then the session's timeline is laid out (gap, approach, hold, retract per event) and
 the whole of it goes through :func:`hydrotact.sim.calc_samples` at once: the
@@ -29,7 +31,8 @@ from ._config import PHASES, DatasetConfig
 from ._events import EventPlan
 
 ROUND_SAMPLES = 8
-"""Approach samples per event per round of the march."""
+"""The most approach samples per event per round of the march (before contact, and
+while the force so far predicts more)."""
 
 FAR_ROW = np.array([0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
 """The probe's pose between events: a metre above the sensor (no contact)."""
@@ -102,45 +105,63 @@ class _Rounds:
         return np.concatenate(self.rows), {name: np.concatenate([part[name] for part in self.parts]) for name in names}
 
 
+def _samples_to_go(forces: list, target: float) -> int:
+    """Approach samples an event still needs, predicted from its last two: with both
+    touching and rising, √F is extrapolated linearly in depth to the target, plus one
+    sample of margin (a rounded probe's hydroelastic force grows about like depth²:
+    contact area and pressure each grow with depth; on sphere8 √F of a 3 mm sphere is
+    linear in depth to a few per cent over 1-7 mm). ROUND_SAMPLES before contact.
+    Under-predicting costs one more round (a batch); over-predicting, poses past the
+    target."""
+    if len(forces) < 2 or not forces[-1] > forces[-2] or not forces[-1] > 0.0:
+        return ROUND_SAMPLES
+    low, high = np.sqrt(max(forces[-2], 0.0)), np.sqrt(forces[-1])
+    ahead = (np.sqrt(target) - high) / (high - low)
+    return int(np.clip(np.ceil(ahead) + 1, 1, ROUND_SAMPLES))
+
+
 def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float, folder: Path | None = None, on_poses=None, on_round=None) -> Presses:
     """March every event's approach until its target force (see the module), then
     compute the holds and the no-contact pose. `folder` keeps each round's responses
     (resumable); `on_poses(n)` after each batch of n poses; `on_round(active,
-    remaining_estimate)` after each round."""
+    poses_to_go)` after each round, with a prediction of the poses still to compute."""
     count = plan.num_events
     steps = plan.speeds / config.rate_hz
-    limits = np.floor((config.max_depth + config.clearance) / steps + 1e-9).astype(np.int64) + 1  # samples up to max_depth
+    limits = np.floor((plan.max_depths + config.clearance) / steps + 1e-9).astype(np.int64) + 1  # samples up to the event's max depth
     rounds = _Rounds(engine, folder, on_poses)
     index_of = [[] for _ in range(count)]  # table index per approach sample so far
     forces = [[] for _ in range(count)]
     done = np.zeros(count, dtype=bool)
     first_above = np.full(count, -1)  # the first sample at or above the target
-    start = 0
+    taken = np.zeros(count, dtype=np.int64)  # approach samples computed per event
     while not done.all():
         active = np.flatnonzero(~done)
-        stops = np.minimum(start + ROUND_SAMPLES, limits[active])
-        lengths = np.maximum(stops - start, 0)
+        wanted = np.array([_samples_to_go(forces[e], plan.target_forces[e]) for e in active.tolist()], dtype=np.int64)
+        starts = taken[active]
+        stops = np.minimum(starts + wanted, limits[active])
+        lengths = stops - starts
         events = np.repeat(active, lengths)
-        k = np.concatenate([np.arange(start, stop) for stop in stops]) if len(events) else np.zeros(0, np.int64)
+        k = np.concatenate([np.arange(a, b) for a, b in zip(starts, stops)])
         depths = -config.clearance + k * steps[events]
-        if len(events):
-            index = rounds.add(_pose_rows(plan, events, depths))
-            force = _normal_forces(rounds.parts[-1], np.arange(len(events)), modulus)
-            offset = 0
-            for event, length in zip(active.tolist(), lengths.tolist()):
-                index_of[event] += index[offset : offset + length].tolist()
-                forces[event] += force[offset : offset + length].tolist()
-                offset += length
-        for event in active.tolist():
-            above = np.flatnonzero(np.asarray(forces[event][start:]) >= plan.target_forces[event])
+        index = rounds.add(_pose_rows(plan, events, depths))
+        force = _normal_forces(rounds.parts[-1], np.arange(len(events)), modulus)
+        offset = 0
+        for event, length in zip(active.tolist(), lengths.tolist()):
+            new = force[offset : offset + length]
+            index_of[event] += index[offset : offset + length].tolist()
+            forces[event] += new.tolist()
+            offset += length
+            above = np.flatnonzero(new >= plan.target_forces[event])
             if above.size:
-                first_above[event] = start + int(above[0])
+                first_above[event] = taken[event] + int(above[0])
                 done[event] = True
-            elif start + ROUND_SAMPLES >= limits[event]:
+            elif taken[event] + length >= limits[event]:
                 done[event] = True
-        start += ROUND_SAMPLES
+        taken[active] = stops
         if on_round is not None:
-            on_round(int((~done).sum()), count)
+            still = np.flatnonzero(~done)
+            to_go = sum(min(_samples_to_go(forces[e], plan.target_forces[e]), int(limits[e] - taken[e])) for e in still.tolist())
+            on_round(len(still), to_go + count + 1)
     reached = first_above >= 0
     hold_depths = np.empty(count)
     approach, depths = [], []

@@ -396,14 +396,10 @@ def calc_sensor_surface(spec: SensorSpec) -> tuple[np.ndarray, np.ndarray]:
 
 def _first_exits(origins, directions, vertices, faces, tolerance):
     """Where each ray origins[i] + t directions[i] (t > tolerance) first meets the
-    surface (the taxels' Möller-Trumbore test, every ray against every triangle), NaN
-    where it meets none."""
-    from ..taxel import intersect_ray_triangle
+    surface (the taxels' Möller-Trumbore test), NaN where it meets none."""
+    from ..taxel import calc_first_hits
 
-    triangles = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]
-    corners = [triangles[:, k].T[:, None, :] for k in range(3)]  # (3, 1, triangles) each
-    hit, t, _, _ = intersect_ray_triangle(np.asarray(origins, dtype=np.float64).T[:, :, None], np.asarray(directions, dtype=np.float64).T[:, :, None], *corners)
-    nearest = np.where(np.asarray(hit) & (np.asarray(t) > tolerance), np.asarray(t), np.inf).min(axis=1)
+    nearest = calc_first_hits(origins, directions, vertices, faces, tolerance)
     return np.where(np.isfinite(nearest)[:, None], origins + np.where(np.isfinite(nearest), nearest, 0.0)[:, None] * directions, np.nan)
 
 

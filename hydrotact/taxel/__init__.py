@@ -16,6 +16,7 @@ from ._patterns import (
 from ._patterns import (
     make_taxel_layout as make_taxel_layout,
 )
+from ._raycast import calc_first_hits as calc_first_hits
 from ._raycast import calc_surface_triangles as calc_surface_triangles
 from ._raycast import intersect_ray_triangle as intersect_ray_triangle
 from ._sample import (

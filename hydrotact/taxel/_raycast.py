@@ -2,6 +2,7 @@
 triangle soup carrying pressure at its corners."""
 
 import jax.numpy as jnp
+import numpy as np
 
 from .._math import safe_div, safe_sqrt
 
@@ -81,3 +82,19 @@ def calc_surface_triangles(surface):
     )
     valid = surface.valid[:, None] & (fan[None, :] + 1 < surface.counts[:, None])
     return corners.reshape(-1, 3, 3), corner_pressures.reshape(-1, 3), valid.reshape(-1)
+
+
+def calc_first_hits(origins, directions, vertices, faces, tolerance: float, chunk: int = 256) -> np.ndarray:
+    """How far each ray origins[i] + t directions[i] goes (t > tolerance) before it
+    first meets a triangle of the mesh (`vertices`, `faces`): every ray against every
+    triangle with :func:`intersect_ray_triangle`, `chunk` rays at a time (host; NumPy
+    in, NumPy out). **Returns:** t (n,), +inf where a ray meets none."""
+    triangles = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]
+    corners = [triangles[:, k].T[:, None, :] for k in range(3)]  # (3, 1, triangles) each
+    origins, directions = np.asarray(origins, dtype=np.float64), np.asarray(directions, dtype=np.float64)
+    nearest = np.full(len(origins), np.inf)
+    for start in range(0, len(origins), chunk):
+        part = slice(start, start + chunk)
+        hit, t, _, _ = intersect_ray_triangle(origins[part].T[:, :, None], directions[part].T[:, :, None], *corners)
+        nearest[part] = np.where(np.asarray(hit) & (np.asarray(t) > tolerance), np.asarray(t), np.inf).min(axis=1)
+    return nearest
