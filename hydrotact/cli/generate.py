@@ -104,6 +104,7 @@ def run(args) -> None:
         "rows": manifest["num_rows"],
         "duration_min": manifest["duration_s"] / 60.0,
         "distinct_poses": manifest["num_distinct_poses"],
+        "rounds": manifest["num_rounds"],
         "shards": len(manifest["shards"]),
         "train_rows": sum(b - a for a, b in split["train"]),
         "test_rows": sum(b - a for a, b in split["test"]),

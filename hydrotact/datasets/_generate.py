@@ -259,6 +259,7 @@ def generate_dataset(sensor, output, *, material=None, modulus=None, config: Dat
         "num_rows": int(table.num_rows),
         "duration_s": float(table.num_rows / config.rate_hz),
         "num_distinct_poses": int(len(presses.rows)),
+        "num_rounds": int(presses.num_rounds),
         "shards": shards,
         "split": _split(timeline, config, split_rng),
         "statistics": {

@@ -45,7 +45,8 @@ class Presses:
     indices of its approach samples (`approach`, a list of arrays), of its hold pose
     (`hold` (N,)), its approach `depths` (list of arrays, m past the skin point) and
     `hold_depths` (N,), whether the target was `reached` (N,), the elastic force at
-    the hold `hold_forces` (N,), N; `far` the index of the no-contact pose."""
+    the hold `hold_forces` (N,), N; `far` the index of the no-contact pose; `num_rounds`
+    the batches computed (the holds' included)."""
 
     rows: np.ndarray
     table: dict
@@ -56,6 +57,7 @@ class Presses:
     reached: np.ndarray
     hold_forces: np.ndarray
     far: int
+    num_rounds: int
 
 
 def _pose_rows(plan: EventPlan, events: np.ndarray, depths: np.ndarray) -> np.ndarray:
@@ -185,7 +187,7 @@ def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float
     rows, table = rounds.table()
     return Presses(
         rows=rows, table=table, approach=approach, depths=depths, hold=holds[:count], hold_depths=hold_depths, reached=reached,
-        hold_forces=_normal_forces(table, holds[:count], modulus), far=int(holds[count]),
+        hold_forces=_normal_forces(table, holds[:count], modulus), far=int(holds[count]), num_rounds=len(rounds.rows),
     )
 
 
