@@ -23,7 +23,7 @@ from .._files import digest
 from ._config import PHASES, DatasetConfig
 from ._store import finish_state, prepare_folder, read_manifest, start_state, write_manifest, write_shards
 
-GENERATOR = f"hydrotact {__version__} datasets/1"
+GENERATOR = f"hydrotact {__version__} datasets/2"
 
 STREAMS = ("events", "material", "sensor", "noise", "split")
 """The independent random streams one seed spawns (numpy SeedSequence), in order."""
