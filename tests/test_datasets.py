@@ -282,18 +282,18 @@ def test_a_run_killed_and_resumed_on_four_devices_gives_the_same_bytes(reference
     env = os.environ | {"HYDROTACT_CACHE_DIR": os.environ.get("HYDROTACT_CACHE_DIR", str(tmp_path / "cache"))}
     process = subprocess.Popen(_command(output, material_file), env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 600
-    while not (output / ".partial" / "round-0000.npz").exists():
+    while not (output / ".partial" / "batch-00000.npz").exists():
         assert process.poll() is None, "the run ended before its first batch was saved"
         assert time.monotonic() < deadline
         time.sleep(0.05)
     process.send_signal(signal.SIGKILL)
     process.wait()
     assert not (output / "manifest.json").exists()
-    rounds = sorted(path.name for path in (output / ".partial").glob("round-*.npz"))
+    saved = sorted(path.name for path in (output / ".partial").glob("batch-*.npz"))
     four = env | {"XLA_FLAGS": "--xla_force_host_platform_device_count=4"}
     finished = subprocess.run(_command(output, material_file), env=four, capture_output=True, text=True, timeout=900)
     assert finished.returncode == 0, finished.stderr
-    assert json.loads(finished.stdout)["rounds"] > len(rounds)  # rounds were left for the four devices
+    assert json.loads(finished.stdout)["rounds"] > len(saved)  # batches were left for the four devices (a smoke round is one batch)
     assert _shards(output) == _shards(reference)
     assert not (output / ".partial").exists()
     again = subprocess.run(_command(output, material_file), env=env, capture_output=True, text=True, timeout=900)

@@ -69,18 +69,23 @@ def _normal_forces(table: dict, index: np.ndarray, modulus: float) -> np.ndarray
     return modulus * np.sum(table["force_S"][index] * table["normal_S"][index], axis=1)
 
 
+BATCH_ROWS = 1024
+"""The most poses computed, saved and reported at once: a round of the march is cut into
+batches of this many (a multiple of the engine's slice), so that the progress moves and
+a killed run loses at most one batch."""
+
+
 class _Rounds:
     """Batches of poses, each computed once: looked up in the run's checkpoint folder
-    (`round-NNNN.npz`, the rows must match exactly) or computed and saved there."""
+    (`batch-NNNNN.npz`, the rows must match exactly) or computed and saved there."""
 
     def __init__(self, engine, folder: Path | None, on_poses=None):
         self.engine, self.folder, self.on_poses = engine, folder, on_poses
-        self.rows, self.parts, self.count = [], [], 0
+        self.rows, self.parts, self.count, self.rounds = [], [], 0, 0
 
-    def add(self, rows: np.ndarray) -> np.ndarray:
-        """Compute (or load) a batch; the table indices of its rows."""
+    def _batch(self, rows: np.ndarray) -> dict:
         number = len(self.rows)
-        path = None if self.folder is None else self.folder / f"round-{number:04d}.npz"
+        path = None if self.folder is None else self.folder / f"batch-{number:05d}.npz"
         result = None
         if path is not None and path.is_file():
             try:
@@ -98,9 +103,16 @@ class _Rounds:
             self.on_poses(len(rows))
         self.rows.append(rows)
         self.parts.append(result)
+        return result
+
+    def add(self, rows: np.ndarray) -> tuple[np.ndarray, dict]:
+        """Compute (or load) one round, in batches: (the table indices of its rows,
+        its unit responses)."""
+        parts = [self._batch(rows[start : start + BATCH_ROWS]) for start in range(0, len(rows), BATCH_ROWS)]
+        self.rounds += 1
         index = np.arange(self.count, self.count + len(rows))
         self.count += len(rows)
-        return index
+        return index, {name: np.concatenate([part[name] for part in parts]) for name in parts[0]}
 
     def table(self) -> tuple[np.ndarray, dict]:
         names = self.parts[0].keys()
@@ -124,7 +136,7 @@ def _samples_to_go(forces: list, target: float) -> int:
 
 def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float, folder: Path | None = None, on_poses=None, on_round=None) -> Presses:
     """March every event's approach until its target force (see the module), then
-    compute the holds and the no-contact pose. `folder` keeps each round's responses
+    compute the holds and the no-contact pose. `folder` keeps each batch's responses
     (resumable); `on_poses(n)` after each batch of n poses; `on_round(active,
     poses_to_go)` after each round, with a prediction of the poses still to compute."""
     count = plan.num_events
@@ -145,8 +157,8 @@ def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float
         events = np.repeat(active, lengths)
         k = np.concatenate([np.arange(a, b) for a, b in zip(starts, stops)])
         depths = -config.clearance + k * steps[events]
-        index = rounds.add(_pose_rows(plan, events, depths))
-        force = _normal_forces(rounds.parts[-1], np.arange(len(events)), modulus)
+        index, result = rounds.add(_pose_rows(plan, events, depths))
+        force = _normal_forces(result, np.arange(len(events)), modulus)
         offset = 0
         for event, length in zip(active.tolist(), lengths.tolist()):
             new = force[offset : offset + length]
@@ -183,11 +195,11 @@ def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float
             hold_depths[event] = -config.clearance + used * step
         approach.append(np.asarray(index_of[event][:used], dtype=np.int64))
         depths.append(-config.clearance + np.arange(used) * step)
-    holds = rounds.add(np.vstack([_pose_rows(plan, np.arange(count), hold_depths), FAR_ROW[None]]))
+    holds, _ = rounds.add(np.vstack([_pose_rows(plan, np.arange(count), hold_depths), FAR_ROW[None]]))
     rows, table = rounds.table()
     return Presses(
         rows=rows, table=table, approach=approach, depths=depths, hold=holds[:count], hold_depths=hold_depths, reached=reached,
-        hold_forces=_normal_forces(table, holds[:count], modulus), far=int(holds[count]), num_rounds=len(rounds.rows),
+        hold_forces=_normal_forces(table, holds[:count], modulus), far=int(holds[count]), num_rounds=rounds.rounds,
     )
 
 

@@ -7,7 +7,7 @@ Layout of a dataset folder:
 - `manifest.json` (`data_schemas/dataset_manifest.schema.json`), written last: its
   presence means the dataset is complete;
 - `.partial/`: the state of an unfinished run (`state.json`: the request's digest;
-  `round-NNNN.npz`: the unit responses of each finished batch), removed at the end;
+  `batch-NNNNN.npz`: the unit responses of each finished batch), removed at the end;
 - the generator's plots (`*.png`).
 
 Every file is written atomically. A folder with anything else in it, another
