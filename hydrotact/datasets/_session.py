@@ -123,8 +123,9 @@ def _samples_to_go(forces: list, target: float) -> int:
     """Approach samples an event still needs, predicted from its last two: with both
     touching and rising, √F is extrapolated linearly in depth to the target, plus one
     sample of margin (a rounded probe's hydroelastic force grows about like depth²:
-    contact area and pressure each grow with depth; on sphere8 √F of a 3 mm sphere is
-    linear in depth to a few per cent over 1-7 mm). ROUND_SAMPLES before contact.
+    contact area and pressure each grow with depth; on sphere8 the slope of √F against
+    depth for a 3 mm sphere falls by about 10 % from 1 to 7 mm, so the prediction
+    errs short, by one more round, rather than long). ROUND_SAMPLES before contact.
     Under-predicting costs one more round (a batch); over-predicting, poses past the
     target."""
     if len(forces) < 2 or not forces[-1] > forces[-2] or not forces[-1] > 0.0:
