@@ -35,17 +35,6 @@ TEST_LOGS := .pytest-logs
 TEST_FIRST := tests/test_contact.py tests/test_datasets.py tests/test_taxel.py tests/test_forward_model.py tests/test_notebooks_and_experiments.py tests/test_press_fit.py
 TEST_FILES := $(TEST_FIRST) $(filter-out $(TEST_FIRST),$(sort $(wildcard tests/test_*.py)))
 
-# Most of the suite's time was XLA compiling the same programs again in each test file
-# and in each CLI or notebook subprocess (a file re-run with a warm cache took a third
-# of its cold time). JAX's persistent compilation cache, shared by every test process
-# and kept in .jax-cache/ between runs (at most 2 GB, least recently used dropped),
-# compiles each program once per run; a clean clone starts it empty.
-JAX_CACHE := $(CURDIR)/.jax-cache
-test: export JAX_COMPILATION_CACHE_DIR := $(JAX_CACHE)
-test: export JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS := 0
-test: export JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES := -1
-test: export JAX_COMPILATION_CACHE_MAX_SIZE := 2000000000
-
 test: $(VENV)/.installed-test
 	$(BIN)/ruff check .
 	@rm -rf $(TEST_LOGS) && mkdir -p $(TEST_LOGS)
@@ -59,4 +48,4 @@ test: $(VENV)/.installed-test
 	echo "make test: every test file passed"
 
 clean:
-	rm -rf $(VENV) out .pytest_cache .pytest-logs .jax-cache
+	rm -rf $(VENV) out .pytest_cache .pytest-logs
