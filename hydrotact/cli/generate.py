@@ -47,7 +47,7 @@ def add_parser(subparsers):
     parser.add_argument(
         "--probe", default=default("probe"), metavar="SPEC", help=f"the indenter: sphere:r=3mm, cylinder:d=2mm, box:x=4mm,y=4mm,z=2mm (default {default('probe')})")
     parser.add_argument("--force-distribution", default=default("force_distribution"), choices=list(FORCE_DISTRIBUTIONS), help="target force law (default loguniform: low forces over-sampled)")
-    parser.add_argument("--force-range", type=_pair, default=default("force_range"), metavar="LOW,HIGH", help=f"target normal force, N (default {pair('force_range')})")
+    parser.add_argument("--force-range", type=_pair, default=default("force_range"), metavar="LOW,HIGH", help=f"target force along the approach, N (default {pair('force_range')})")
     parser.add_argument("--max-tilt", type=number, default=default("max_tilt_deg"), metavar="DEG", help=f"largest angle between the approach and the skin normal (default {default('max_tilt_deg'):g})")
     parser.add_argument("--speed-range", type=_pair, default=default("speed_range"), metavar="LOW,HIGH", help=f"approach and retract speed, m/s (default {pair('speed_range')})")
     parser.add_argument("--hold-range", type=_pair, default=default("hold_range"), metavar="LOW,HIGH", help=f"hold duration, s (default {pair('hold_range')})")

@@ -136,7 +136,7 @@ class EventPlan:
 
 
 def draw_target_forces(config: DatasetConfig, count: int, rng: np.random.Generator) -> np.ndarray:
-    """Target normal forces (N) from the configured distribution."""
+    """Target forces along the approach (N) from the configured distribution."""
     low, high = config.force_range
     if config.force_distribution == "loguniform":
         return np.exp(rng.uniform(np.log(low), np.log(high), count))
