@@ -44,8 +44,8 @@ class Presses:
     unit responses `table`, a dict of UnitResponse fields), per event the table
     indices of its approach samples (`approach`, a list of arrays), of its hold pose
     (`hold` (N,)), its approach `depths` (list of arrays, m past the skin point) and
-    `hold_depths` (N,), whether the target was `reached` (N,), the elastic force at
-    the hold `hold_forces` (N,), N; `far` the index of the no-contact pose; `num_rounds`
+    `hold_depths` (N,), whether the target was `reached` (N,), the elastic force along
+    the approach at the hold `hold_forces` (N,), N; `far` the index of the no-contact pose; `num_rounds`
     the batches computed (the holds' included)."""
 
     rows: np.ndarray
