@@ -15,9 +15,9 @@ import numpy as np
 from .._errors import HydrotactError
 
 FORCE_DISTRIBUTIONS = ("loguniform", "uniform")
-"""How an event's target force (along its approach: what the gantry controls) is drawn from `force_range`: `loguniform` (the
-default: as many events in 0.05-0.5 N as in 0.5-5 N, so low forces are over-sampled)
-or `uniform`."""
+"""How an event's target force (along its approach: what the gantry controls) is
+drawn from `force_range`: `loguniform` (the default: as many events in 0.05-0.5 N as
+in 0.5-5 N, so low forces are over-sampled) or `uniform`."""
 
 PHASES = {"gap": 0, "approach": 1, "hold": 2, "retract": 3}
 """The `phase` label's codes: no contact between events, approach, hold, retract."""
@@ -30,9 +30,10 @@ class DatasetConfig:
     **Events:** `events` how many (the paper's 2500); `seed` of every draw (events,
     material, sensor variation, noise); `probe` the indenter's spec (a 3 mm sphere by
     default; any library probe); `force_distribution` and `force_range` (N) of the
-    target force along the approach (what the gantry's load cell controls); `max_tilt_deg` the largest angle between the approach and the
-    inward skin normal (drawn uniformly over the cone's solid angle, so shear spans
-    what a tilted press gives); `speed_range` (m/s) of the approach and the retract
+    target force along the approach (what the gantry's load cell controls);
+    `max_tilt_deg` the largest angle between the approach and the inward skin normal
+    (drawn uniformly over the cone's solid angle, so shear spans what a tilted press
+    gives); `speed_range` (m/s) of the approach and the retract
     (one speed per event: the retract retraces the approach's poses, so a press costs
     one distinct pose per approach sample plus its hold); `hold_range` and `gap_range`
     (s) the hold and the no-contact time before each event; `clearance` (m) where the

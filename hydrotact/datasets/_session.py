@@ -5,9 +5,9 @@ Each event approaches its skin point along its drawn direction at its drawn spee
 one sample per 1/rate, no deeper than its own limit (:attr:`EventPlan.max_depths`).
 The approaches of all events march together in rounds (one batch of unit responses per
 round), each event taking as many samples as its force so far predicts it still needs
-(at most `ROUND_SAMPLES`): after each round an event whose elastic force along
-its approach E(0) F(s)·d has reached its target stops, and its hold depth is interpolated linearly
-between its last two samples (the approach samples find the depth; there is no
+(at most `ROUND_SAMPLES`): after each round an event whose elastic force along its
+approach E(0) F(s)·d has reached its target stops, and its hold depth is interpolated
+linearly between its last two samples (the approach samples find the depth; there is no
 separate search). The holds (one pose each) are computed last. The retract retraces
 the approach's poses in reverse.
 
@@ -45,8 +45,8 @@ class Presses:
     indices of its approach samples (`approach`, a list of arrays), of its hold pose
     (`hold` (N,)), its approach `depths` (list of arrays, m past the skin point) and
     `hold_depths` (N,), whether the target was `reached` (N,), the elastic force along
-    the approach at the hold `hold_forces` (N,), N; `far` the index of the no-contact pose; `num_rounds`
-    the batches computed (the holds' included)."""
+    the approach at the hold `hold_forces` (N,), N; `far` the index of the no-contact
+    pose; `num_rounds` the batches computed (the holds' included)."""
 
     rows: np.ndarray
     table: dict
@@ -65,13 +65,13 @@ def _pose_rows(plan: EventPlan, events: np.ndarray, depths: np.ndarray) -> np.nd
     return np.column_stack([tips, plan.rotation_vectors[events]])
 
 
-def _axial_forces(table: dict, index: np.ndarray, directions: np.ndarray, modulus: float) -> np.ndarray:
+def _axial_forces(forces_S: np.ndarray, directions: np.ndarray, modulus: float) -> np.ndarray:
     """The elastic force E(0) F·d along each press's approach direction d (what the
     gantry's load cell controls to its target): not the contact normal force, which on
     a curved skin near the board can stay small while the probe sinks past its own
     radius and the total force grows to several times the target (measured on sphere8:
     30 N with 4 N along the field's normal)."""
-    return modulus * np.sum(table["force_S"][index] * directions, axis=1)
+    return modulus * np.sum(forces_S * directions, axis=1)
 
 
 BATCH_ROWS = 1024
@@ -169,7 +169,7 @@ def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float
         order = np.argsort(depths, kind="stable")
         index, force = np.empty(len(events), np.int64), np.empty(len(events))
         index[order], result = rounds.add(_pose_rows(plan, events[order], depths[order]))
-        force[order] = _axial_forces(result, np.arange(len(events)), plan.directions[events[order]], modulus)
+        force[order] = _axial_forces(result["force_S"], plan.directions[events[order]], modulus)
         offset = 0
         for event, length in zip(active.tolist(), lengths.tolist()):
             new = force[offset : offset + length]
@@ -210,7 +210,7 @@ def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float
     rows, table = rounds.table()
     return Presses(
         rows=rows, table=table, approach=approach, depths=depths, hold=holds[:count], hold_depths=hold_depths, reached=reached,
-        hold_forces=_axial_forces(table, holds[:count], plan.directions, modulus), far=int(holds[count]), num_rounds=rounds.rounds,
+        hold_forces=_axial_forces(table["force_S"][holds[:count]], plan.directions, modulus), far=int(holds[count]), num_rounds=rounds.rounds,
     )
 
 
