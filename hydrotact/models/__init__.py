@@ -24,3 +24,10 @@ from ._estimator import decode_estimator_outputs as decode_estimator_outputs
 from ._estimator import init_estimator as init_estimator
 from ._estimator import make_estimator_spec as make_estimator_spec
 from ._estimator import make_initial_state as make_initial_state
+from ._loss import DEFAULT_WEIGHTS as DEFAULT_WEIGHTS
+from ._loss import calc_arc_length as calc_arc_length
+from ._loss import calc_loss as calc_loss
+from ._loss import calc_loss_terms as calc_loss_terms
+from ._loss import calc_table_metrics as calc_table_metrics
+from ._sequences import Normaliser as Normaliser
+from ._sequences import make_sequences as make_sequences

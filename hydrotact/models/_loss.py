@@ -1,0 +1,88 @@
+"""The training loss of an estimator and the paper's Table I metrics (pure JAX).
+
+Targets per sample (a dict of arrays with a leading time/batch shape): `force` (..., 4)
+Fx, Fy, Fz, Fn (N); `theta`, `phi` (rad; NaN where there is no contact); `contact`
+(0 or 1, |F| > 0.1 N); and `mask` (1 where the sample counts: after a sequence's
+burn-in, inside the data).
+
+Loss = w_force · MSE(force) + w_angle · (cross-entropy over the bins, or the MSE of
+the angles, on contact samples) + w_contact · BCE(contact logit). The paper weighs
+the contact BCE by 10; the others by 1 (:data:`DEFAULT_WEIGHTS`).
+"""
+
+import jax
+import jax.numpy as jnp
+
+from ._bins import calc_bin_index
+from ._estimator import EstimatorSpec, decode_estimator_outputs
+
+DEFAULT_WEIGHTS = {"force": 1.0, "angle": 1.0, "contact": 10.0}
+
+
+def _masked_mean(values, mask):
+    return jnp.sum(values * mask) / jnp.maximum(jnp.sum(mask), 1.0)
+
+
+def calc_loss_terms(spec: EstimatorSpec, raw, targets: dict) -> dict:
+    """Each loss term, averaged over the samples that count: `force` (N², mean of the
+    four), `angle` (bin cross-entropy, or rad² unbinned; contact samples only; 0 on a
+    sensor without angles), `contact` (BCE)."""
+    mask = targets["mask"].astype(raw.dtype)
+    layout = spec.outputs
+    force = jnp.mean((raw[..., :4] - targets["force"]) ** 2, axis=-1)
+    logit = raw[..., layout["contact"].start]
+    label = targets["contact"].astype(raw.dtype)
+    contact = jnp.maximum(logit, 0.0) - logit * label + jnp.log1p(jnp.exp(-jnp.abs(logit)))  # BCE with logits, stable
+    terms = {"force": _masked_mean(force, mask), "contact": _masked_mean(contact, mask)}
+    if not spec.angles:
+        return terms | {"angle": jnp.zeros((), raw.dtype)}
+    touching = mask * label * jnp.isfinite(targets["theta"]) * jnp.isfinite(targets["phi"])
+    theta, phi = jnp.nan_to_num(targets["theta"]), jnp.nan_to_num(targets["phi"])
+    if spec.binned:
+        angle = 0.0
+        for name, bins, truth in (("theta", spec.theta_bins, theta), ("phi", spec.phi_bins, phi)):
+            log_p = jax.nn.log_softmax(raw[..., layout[name]], axis=-1)
+            angle = angle - jnp.take_along_axis(log_p, calc_bin_index(bins, truth)[..., None], axis=-1)[..., 0]
+    else:
+        angle = (raw[..., layout["theta"].start] - theta) ** 2 + (raw[..., layout["phi"].start] - phi) ** 2
+    return terms | {"angle": _masked_mean(angle, touching)}
+
+
+def calc_loss(spec: EstimatorSpec, raw, targets: dict, weights: dict | None = None):
+    """The weighted sum of :func:`calc_loss_terms`, and the terms."""
+    weights = DEFAULT_WEIGHTS | (weights or {})
+    terms = calc_loss_terms(spec, raw, targets)
+    return sum(weights[name] * value for name, value in terms.items()), terms
+
+
+def calc_arc_length(theta_1, phi_1, theta_2, phi_2, radius):
+    """The great-circle distance between two contact directions on a sphere of
+    `radius` (the paper's Eq. 2 as a dot product of unit vectors, with the papers'
+    angles: n = (cos θ sin φ, −sin θ, cos θ cos φ)). Eq. 2 as printed,
+    R acos(sin φ1 sin φ2 + cos φ1 cos φ2 cos(θ1 − θ2)), is this with θ and φ
+    exchanged: θ is the latitude here, φ the longitude."""
+    def unit(theta, phi):
+        return jnp.stack([jnp.cos(theta) * jnp.sin(phi), -jnp.sin(theta), jnp.cos(theta) * jnp.cos(phi)], axis=-1)
+
+    cosine = jnp.clip(jnp.sum(unit(theta_1, phi_1) * unit(theta_2, phi_2), axis=-1), -1.0, 1.0)
+    return radius * jnp.arccos(cosine)
+
+
+def calc_table_metrics(spec: EstimatorSpec, raw, targets: dict, radius: float | None = None) -> dict:
+    """Table I of the paper on the samples that count: RMSE of Fx, Fy, Fz, Fn (N) over
+    all of them, of θ and φ (rad) over the contact samples, the contact BCE, and
+    (with the sensor's `radius`) the mean arc-length error (m) over contact samples."""
+    mask = targets["mask"].astype(raw.dtype)
+    out = decode_estimator_outputs(spec, raw)
+    metrics = {}
+    for k, name in enumerate(("fx", "fy", "fz", "fn")):
+        metrics[f"{name}_rmse"] = jnp.sqrt(_masked_mean((out["force"][..., k] - targets["force"][..., k]) ** 2, mask))
+    metrics["contact_bce"] = calc_loss_terms(spec, raw, targets)["contact"]
+    if spec.angles:
+        touching = mask * targets["contact"].astype(raw.dtype) * jnp.isfinite(targets["theta"]) * jnp.isfinite(targets["phi"])
+        theta, phi = jnp.nan_to_num(targets["theta"]), jnp.nan_to_num(targets["phi"])
+        metrics["theta_rmse"] = jnp.sqrt(_masked_mean((out["theta"] - theta) ** 2, touching))
+        metrics["phi_rmse"] = jnp.sqrt(_masked_mean((out["phi"] - phi) ** 2, touching))
+        if radius is not None:
+            metrics["arc_length_mean"] = _masked_mean(calc_arc_length(theta, phi, out["theta"], out["phi"], radius), touching)
+    return metrics
