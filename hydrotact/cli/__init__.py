@@ -15,14 +15,14 @@ import warnings
 
 from .. import __version__
 from .._errors import HydrotactError, HydrotactWarning
-from . import compare, contact, demo, field, fit, generate, mesh, simulate
+from . import compare, contact, demo, field, fit, generate, mesh, simulate, train
 
-COMMANDS = (mesh, field, contact, simulate, fit, compare, generate, demo)
+COMMANDS = (mesh, field, contact, simulate, fit, compare, generate, train, demo)
 """The commands, in the order `hydrotact --help` lists them."""
 
-# Planned, each its own module here once its library stage exists: train and evaluate
-# (the estimator), predict, export (microcontroller weights), design (barometer layouts).
-FUTURE_COMMANDS = ("train", "evaluate", "predict", "export", "design")
+# Planned, each its own module here once its library stage exists: evaluate (the
+# estimator), predict, export (microcontroller weights), design (barometer layouts).
+FUTURE_COMMANDS = ("evaluate", "predict", "export", "design")
 
 
 class Parser(argparse.ArgumentParser):

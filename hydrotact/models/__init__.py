@@ -29,5 +29,11 @@ from ._loss import calc_arc_length as calc_arc_length
 from ._loss import calc_loss as calc_loss
 from ._loss import calc_loss_terms as calc_loss_terms
 from ._loss import calc_table_metrics as calc_table_metrics
+from ._saved import load_estimator as load_estimator
+from ._saved import save_estimator as save_estimator
 from ._sequences import Normaliser as Normaliser
 from ._sequences import make_sequences as make_sequences
+from ._train import SCHEDULES as SCHEDULES
+from ._train import TrainConfig as TrainConfig
+from ._train import TrainedEstimator as TrainedEstimator
+from ._train import train_estimator as train_estimator

@@ -9,3 +9,4 @@ from ._press import plot_press_fit as plot_press_fit
 from ._render import render_contact as render_contact
 from ._render import render_field as render_field
 from ._render import render_mesh as render_mesh
+from ._training import plot_training_curve as plot_training_curve
