@@ -1,16 +1,35 @@
-"""Estimator training pieces: the loss terms against direct NumPy sums, the arc length
-against the paper's Eq. 2, sequences with burn-in against the paper's windows."""
+"""Estimator training: the loss terms against direct NumPy sums, the arc length against
+the paper's Eq. 2, sequences with burn-in against the paper's windows; a short training
+on a tiny generated dataset (every loss term falls, every metric beats a constant
+predictor), resumption, saving, and `hydrotact train`."""
 
+import json
+
+import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
+from helpers import assert_one_line_error, run_cli
 
+from hydrotact import HydrotactError
+from hydrotact.datasets import load_dataset
 from hydrotact.models import (
     Normaliser,
+    StreamingEstimator,
+    TrainConfig,
     calc_arc_length,
+    calc_detection,
+    calc_estimator_sequence,
+    calc_loss,
     calc_loss_terms,
     calc_table_metrics,
+    evaluate_estimator,
+    load_estimator,
     make_estimator_spec,
     make_sequences,
+    predict_recording,
+    save_estimator,
+    train_estimator,
 )
 from hydrotact.sensors import load_sensor
 
@@ -87,3 +106,130 @@ def test_sequences_with_burn_in_cover_each_label_once_and_windows_match_the_pape
     # The paper's windows: one label per 512-step history, the label last.
     inputs, targets = make_sequences(arrays, ["b0", "b1"], norm, length=1, burn_in=15, dtype=np.float64)
     assert inputs.shape == (n, 16, 2) and np.all(targets["mask"][:, :-1] == 0) and np.all(targets["mask"][:, -1] == 1)
+
+
+# --- training on a tiny generated dataset ------------------------------------------
+
+TINY = ["--sensor", "sphere8", "--events", "40", "--seed", "5", "--rays", "16", "--hold-range", "0.3,0.8", "--gap-range", "0.2,0.4",
+        "--speed-range", "0.01,0.02", "--force-range", "0.2,4", "--noise", "2", "--no-plots", "--json"]
+QUICK = dict(hidden=(8, 8), sequence_length=64, burn_in=32, batch_size=8, learning_rate=1e-2, max_epochs=12, patience=12)
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """A 40-event sphere8 dataset (about 4 min of session), generated in this process."""
+    from hydrotact.cli import main
+
+    folder = tmp_path_factory.mktemp("tiny") / "dataset"
+    assert main(["generate", *TINY, "-o", str(folder)]) == 0
+    return load_dataset(folder)
+
+
+@pytest.fixture(scope="module")
+def trained(tiny):
+    return train_estimator(tiny, load_sensor("sphere8"), TrainConfig(**QUICK))
+
+
+def test_training_lowers_every_loss_term_and_beats_a_constant_predictor(tiny, trained):
+    first, best = trained.history[0], trained.history[trained.best_epoch]
+    for name, value in best["validation_terms"].items():
+        assert value < first["validation_terms"][name], (name, value, first["validation_terms"][name])
+    # The constant predictor: the training split's means (forces, angles over contact) and contact rate.
+    train, held_out = tiny.arrays("train"), tiny.arrays("test")
+    constant = {f"{name}_rmse": np.sqrt(np.mean((held_out[name] - train[name].mean()) ** 2)) for name in ("fx", "fy", "fz", "fn")}
+    touching = held_out["contact"] > 0
+    for name in ("theta", "phi"):
+        constant[f"{name}_rmse"] = np.sqrt(np.mean((held_out[name][touching] - np.nanmean(train[name][train["contact"] > 0])) ** 2))
+    rate = train["contact"].mean()
+    constant["contact_bce"] = -np.mean(held_out["contact"] * np.log(rate) + (1 - held_out["contact"]) * np.log(1 - rate))
+    for name, value in constant.items():
+        assert best["validation_metrics"][name] < value, (name, best["validation_metrics"][name], value)
+
+
+def test_an_interrupted_training_resumes_to_the_same_parameters(tiny, trained, tmp_path):
+    def stop_after_the_third(entry):
+        if entry["epoch"] == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        train_estimator(tiny, load_sensor("sphere8"), TrainConfig(**QUICK), folder=tmp_path, on_epoch=stop_after_the_third)
+    resumed = train_estimator(tiny, load_sensor("sphere8"), TrainConfig(**QUICK), folder=tmp_path)
+    assert [e["validation_loss"] for e in resumed.history] == [e["validation_loss"] for e in trained.history]
+    for a, b in zip(jax.tree_util.tree_leaves(resumed.params), jax.tree_util.tree_leaves(trained.params)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    # Another training into the same folder is refused, the checkpoint untouched.
+    before = (tmp_path / "checkpoint.npz").read_bytes()
+    with pytest.raises(HydrotactError, match="another training"):
+        train_estimator(tiny, load_sensor("sphere8"), TrainConfig(**(QUICK | {"seed": 1})), folder=tmp_path)
+    assert (tmp_path / "checkpoint.npz").read_bytes() == before
+
+
+def test_a_saved_model_reads_back_the_same(trained, tmp_path):
+    save_estimator(trained, tmp_path, "sphere8")
+    loaded = load_estimator(tmp_path)
+    assert loaded.spec == trained.spec and loaded.channels == trained.channels and loaded.config == trained.config
+    for a, b in zip(jax.tree_util.tree_leaves(loaded.params), jax.tree_util.tree_leaves(trained.params)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b, dtype=np.float32))
+    np.testing.assert_array_equal(loaded.normaliser.mean, trained.normaliser.mean)
+    (tmp_path / "weights.npz").write_bytes(b"not a zip")
+    with pytest.raises(HydrotactError, match="weights.npz"):
+        load_estimator(tmp_path)
+
+
+def test_burn_in_sequences_give_the_window_methods_loss(tiny, trained):
+    """The same labels, the loss of the trained GRU: from sequences of 64 labels after a
+    32-sample burn-in, and from the paper's windows (each label after its own 511
+    samples of history): equal within a few per cent (the GRU's memory is short)."""
+    held_out = tiny.arrays("test")
+    spec, weights = trained.spec, dict(trained.config.weights)
+    losses = []
+    for length, burn_in in ((64, 32), (1, 511)):
+        inputs, targets = make_sequences(held_out, trained.channels, trained.normaliser, length, burn_in)
+        raw = jax.vmap(lambda x: calc_estimator_sequence(spec, trained.params, x)[1])(jnp.asarray(inputs))
+        losses.append(float(calc_loss(spec, raw, {k: jnp.asarray(v) for k, v in targets.items()}, weights)[0]))
+    np.testing.assert_allclose(losses[0], losses[1], rtol=0.03)
+
+
+def test_train_command_writes_the_model_and_its_curve(tiny, tmp_path):
+    result = run_cli("train", tiny.folder, "--hidden", "6,6", "--sequence-length", "64", "--burn-in", "16", "--batch-size", "8", "--max-epochs", "2", "-o", tmp_path / "model", "--json")
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert report["epochs"] == 2 and report["parameters"] < 6000 and report["binned"] is True
+    for name in ("model.json", "weights.npz", "checkpoint.npz", "training_curve.png"):
+        assert (tmp_path / "model" / name).stat().st_size > 0, name
+    assert load_estimator(tmp_path / "model").spec.hidden == (6, 6)
+    assert_one_line_error(run_cli("train", tmp_path / "nowhere", "-o", tmp_path / "m2"), "nowhere")
+
+
+def test_streaming_one_sample_at_a_time_equals_the_batched_prediction(tiny, trained):
+    block = tiny.blocks("test")[0]
+    readings = np.column_stack([block[name] for name in trained.channels])[:300]
+    batched = predict_recording(trained, readings)
+    stream = StreamingEstimator(trained)
+    streamed = [stream.update(reading) for reading in readings]
+    for name, values in batched.items():
+        np.testing.assert_array_equal(np.array([s[name] for s in streamed], dtype=values.dtype), values, err_msg=name)
+    stream.reset()
+    assert stream.update(readings[0]) == streamed[0]
+
+
+def test_contact_detection_latencies_on_known_edges():
+    truth = np.zeros(1000, bool)
+    truth[100:200] = truth[500:700] = True
+    detected = np.zeros(1000, bool)
+    detected[103:205] = detected[510:702] = True  # late by 3 and 10 samples; released 5 and 2 late
+    result = calc_detection(truth, detected, 100.0)
+    assert result["onset_latency"]["count"] == 2 and result["release_latency"]["count"] == 2
+    np.testing.assert_allclose(result["onset_latency"]["median_s"], 0.065)
+    np.testing.assert_allclose(result["release_latency"]["median_s"], 0.035)
+    np.testing.assert_allclose(result["accuracy"], 1 - 20 / 1000)
+    assert result["missed_contacts"] == 0
+    assert calc_detection(truth, np.zeros(1000, bool), 100.0)["missed_contacts"] == 2
+
+
+def test_evaluation_on_the_held_out_blocks(tiny, trained):
+    result = evaluate_estimator(trained, tiny.blocks("test"), tiny.manifest["config"]["rate_hz"], radius=0.01)
+    assert set(result["metrics"]) >= {"fx_rmse", "fy_rmse", "fz_rmse", "fn_rmse", "theta_rmse", "phi_rmse", "contact_bce", "arc_length_mean"}
+    assert all(np.isfinite(v) for v in result["metrics"].values())
+    assert result["detection"]["contact_head"]["accuracy"] > 0.7
+    assert len(result["predictions"]) == len(tiny.blocks("test"))

@@ -24,6 +24,11 @@ from ._estimator import decode_estimator_outputs as decode_estimator_outputs
 from ._estimator import init_estimator as init_estimator
 from ._estimator import make_estimator_spec as make_estimator_spec
 from ._estimator import make_initial_state as make_initial_state
+from ._evaluate import CONTACT_FORCE as CONTACT_FORCE
+from ._evaluate import StreamingEstimator as StreamingEstimator
+from ._evaluate import calc_detection as calc_detection
+from ._evaluate import evaluate_estimator as evaluate_estimator
+from ._evaluate import predict_recording as predict_recording
 from ._loss import DEFAULT_WEIGHTS as DEFAULT_WEIGHTS
 from ._loss import calc_arc_length as calc_arc_length
 from ._loss import calc_loss as calc_loss

@@ -1,0 +1,141 @@
+"""Using a trained estimator: batched predictions over recordings, streaming one sample
+at a time (as on the microcontroller), and the paper's evaluation (Table I metrics,
+the arc-length error, contact detection and its latency).
+
+A recording is run as one sequence from the zero state, as the estimator runs on the
+sensor: no windows. Batched and streaming predictions apply the same step function
+(:func:`calc_estimator_step`), the first through `lax.scan`, the second one call per
+sample.
+"""
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._estimator import calc_estimator_sequence, calc_estimator_step, decode_estimator_outputs, make_initial_state
+from ._loss import calc_table_metrics
+from ._sequences import FORCE_COLUMNS
+
+CONTACT_FORCE = 0.1
+"""N: the contact flag's threshold on |F| (the datasets' label), also used to turn a
+predicted force into a contact detector."""
+
+
+def _decoded(spec, raw) -> dict:
+    out = {name: np.asarray(value) for name, value in decode_estimator_outputs(spec, raw).items()}
+    force = out.pop("force")
+    return {name: force[..., k] for k, name in enumerate(FORCE_COLUMNS)} | out
+
+
+def predict_recording(trained, readings) -> dict:
+    """Estimates for a recording `readings` (T, channels) in Pa, in the model's channel
+    order, from the zero state: fx, fy, fz, fn (N), theta, phi (rad; sensors with
+    contact angles), contact_probability; each (T,)."""
+    inputs = jnp.asarray(trained.normaliser(np.asarray(readings, dtype=np.float64)), dtype=jnp.float32)
+    _, raw = _run(trained.spec, trained.params, inputs)
+    return _decoded(trained.spec, raw)
+
+
+@functools.lru_cache(maxsize=32)
+def _sequence_function(spec):
+    return jax.jit(lambda params, inputs: calc_estimator_sequence(spec, params, inputs))
+
+
+def _run(spec, params, inputs):
+    return _sequence_function(spec)(params, inputs)
+
+
+class StreamingEstimator:
+    """The estimator one sample at a time: `update(reading)` (channels,) in Pa returns
+    the estimates for that sample (a dict of floats), carrying the hidden state;
+    `reset()` returns to the zero state. The same numbers as :func:`predict_recording`."""
+
+    def __init__(self, trained):
+        self.trained = trained
+        spec = trained.spec
+        self._step = jax.jit(lambda params, state, x: calc_estimator_step(spec, params, state, x))
+        self.reset()
+
+    def reset(self) -> None:
+        self.state = make_initial_state(self.trained.spec, jnp.float32)
+
+    def update(self, reading) -> dict:
+        x = jnp.asarray(self.trained.normaliser(np.asarray(reading, dtype=np.float64)), dtype=jnp.float32)
+        self.state, raw = self._step(self.trained.params, self.state, x)
+        return {name: float(value) for name, value in _decoded(self.trained.spec, raw).items()}
+
+
+def _edges(flag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    change = np.diff(np.concatenate([[0], flag.astype(np.int8), [0]]))
+    return np.flatnonzero(change == 1), np.flatnonzero(change == -1)  # first contact sample, first sample after
+
+
+def calc_detection(truth: np.ndarray, detected: np.ndarray, rate_hz: float) -> dict:
+    """A contact detector against the contact flag: accuracy, precision, recall, and
+    the latency (s) at onset and release (median and 95th percentile over the true
+    contacts: from the true edge to the detector's first agreeing sample within that
+    contact, or within the gap that follows a release)."""
+    truth, detected = np.asarray(truth, bool), np.asarray(detected, bool)
+    true_on, true_off = _edges(truth)
+    onset, release = [], []
+    for start, stop in zip(true_on, true_off):
+        hit = np.flatnonzero(detected[start:stop])
+        if hit.size:
+            onset.append(hit[0] / rate_hz)
+        following = np.searchsorted(true_on, stop)
+        end = true_on[following] if following < len(true_on) else len(truth)
+        quiet = np.flatnonzero(~detected[stop:end])
+        if quiet.size:
+            release.append(quiet[0] / rate_hz)
+    positives = detected.sum()
+
+    def stats(values):
+        if not values:
+            return {"median_s": float("nan"), "p95_s": float("nan"), "count": 0}
+        return {"median_s": float(np.median(values)), "p95_s": float(np.percentile(values, 95)), "count": len(values)}
+
+    return {
+        "accuracy": float(np.mean(truth == detected)),
+        "precision": float((truth & detected).sum() / positives) if positives else float("nan"),
+        "recall": float((truth & detected).sum() / truth.sum()) if truth.any() else float("nan"),
+        "missed_contacts": int(len(true_on) - len(onset)),
+        "onset_latency": stats(onset),
+        "release_latency": stats(release),
+    }
+
+
+def evaluate_estimator(trained, blocks: list, rate_hz: float, radius: float | None = None) -> dict:
+    """The paper's evaluation over recordings (`blocks`: dicts of columns, each run
+    from the zero state, every sample counted): Table I's metrics (RMSE of fx, fy, fz,
+    fn in N, of theta and phi in rad over contact samples, contact BCE), the mean
+    arc-length error (m, with the sensor's `radius`), and two contact detectors (the
+    predicted probability above 0.5; the predicted |F| above :data:`CONTACT_FORCE`).
+    Returns {"metrics", "detection", "predictions" (per block)}."""
+    spec = trained.spec
+    raws, predictions, targets = [], [], []
+    for block in blocks:
+        readings = np.column_stack([block[name] for name in trained.channels])
+        inputs = jnp.asarray(trained.normaliser(readings), dtype=jnp.float32)
+        _, raw = _run(spec, trained.params, inputs)
+        raws.append(raw)
+        predictions.append(_decoded(spec, raw))
+        count = len(readings)
+        targets.append({
+            "force": np.column_stack([block[name] for name in FORCE_COLUMNS]).astype(np.float32),
+            "theta": np.asarray(block.get("theta", np.full(count, np.nan)), np.float32),
+            "phi": np.asarray(block.get("phi", np.full(count, np.nan)), np.float32),
+            "contact": np.asarray(block["contact"], np.float32),
+            "mask": np.ones(count, np.float32),
+        })
+    joined = {name: jnp.asarray(np.concatenate([t[name] for t in targets])) for name in targets[0]}
+    metrics = {name: float(value) for name, value in calc_table_metrics(spec, jnp.concatenate(raws), joined, radius).items()}
+    truth = np.concatenate([t["contact"] for t in targets]) > 0
+    probability = np.concatenate([p["contact_probability"] for p in predictions])
+    magnitude = np.linalg.norm(np.column_stack([np.concatenate([p[name] for p in predictions]) for name in ("fx", "fy", "fz")]), axis=1)
+    detection = {
+        "contact_head": calc_detection(truth, probability > 0.5, rate_hz),
+        "force_threshold": calc_detection(truth, magnitude > CONTACT_FORCE, rate_hz),
+    }
+    return {"metrics": metrics, "detection": detection, "predictions": predictions}
