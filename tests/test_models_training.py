@@ -24,6 +24,7 @@ from hydrotact.models import (
     calc_loss_terms,
     calc_table_metrics,
     evaluate_estimator,
+    export_c_header,
     load_estimator,
     make_estimator_spec,
     make_sequences,
@@ -233,3 +234,41 @@ def test_evaluation_on_the_held_out_blocks(tiny, trained):
     assert all(np.isfinite(v) for v in result["metrics"].values())
     assert result["detection"]["contact_head"]["accuracy"] > 0.7
     assert len(result["predictions"]) == len(tiny.blocks("test"))
+
+
+C_MAIN = r"""
+#include <stdio.h>
+#include "model.h"
+int main(void) {
+  int count; if (scanf("%d", &count) != 1) return 1;
+  hydrotact_state state = {0}; hydrotact_output out; float readings[HYDROTACT_NUM_INPUTS];
+  for (int t = 0; t < count; ++t) {
+    for (int j = 0; j < HYDROTACT_NUM_INPUTS; ++j) if (scanf("%f", &readings[j]) != 1) return 1;
+    hydrotact_step(&state, readings, &out);
+    printf("%.9g %.9g %.9g %.9g %.9g %.9g %.9g\n", out.force[0], out.force[1], out.force[2], out.force[3], out.theta, out.phi, out.contact);
+  }
+  return 0;
+}
+"""
+
+
+def test_the_c_export_compiles_and_matches_jax(tiny, trained, tmp_path):
+    import shutil
+    import subprocess
+
+    compiler = shutil.which("cc") or shutil.which("gcc")
+    assert compiler, "no C compiler on this machine"
+    summary = export_c_header(trained, tmp_path / "model.h", "sphere8")
+    assert summary["flash_bytes"] == 4 * (summary["parameters"] + 3 * 8 + trained.spec.theta_bins.count + trained.spec.phi_bins.count)
+    (tmp_path / "main.c").write_text(C_MAIN)
+    build = subprocess.run([compiler, "-std=c99", "-O2", "-Wall", "-Werror", "-o", str(tmp_path / "step"), str(tmp_path / "main.c"), "-lm"], capture_output=True, text=True, cwd=tmp_path)
+    assert build.returncode == 0, build.stderr
+    block = tiny.blocks("test")[0]
+    readings = np.column_stack([block[name] for name in trained.channels])[:400].astype(np.float32)
+    text = f"{len(readings)}\n" + "\n".join(" ".join(f"{v!r}" for v in row.tolist()) for row in readings) + "\n"
+    run = subprocess.run([str(tmp_path / "step")], input=text, capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0, run.stderr
+    c = np.loadtxt(run.stdout.splitlines())
+    jax_out = predict_recording(trained, readings.astype(np.float64))
+    expected = np.column_stack([jax_out[name] for name in ("fx", "fy", "fz", "fn", "theta", "phi", "contact_probability")])
+    np.testing.assert_allclose(c, expected, rtol=1e-5, atol=1e-5)

@@ -15,14 +15,13 @@ import warnings
 
 from .. import __version__
 from .._errors import HydrotactError, HydrotactWarning
-from . import compare, contact, demo, field, fit, generate, mesh, simulate, train
+from . import compare, contact, demo, evaluate, export, field, fit, generate, mesh, predict, simulate, train
 
-COMMANDS = (mesh, field, contact, simulate, fit, compare, generate, train, demo)
+COMMANDS = (mesh, field, contact, simulate, fit, compare, generate, train, evaluate, predict, export, demo)
 """The commands, in the order `hydrotact --help` lists them."""
 
-# Planned, each its own module here once its library stage exists: evaluate (the
-# estimator), predict, export (microcontroller weights), design (barometer layouts).
-FUTURE_COMMANDS = ("evaluate", "predict", "export", "design")
+# Planned, its own module here once its library stage exists: design (barometer layouts).
+FUTURE_COMMANDS = ("design",)
 
 
 class Parser(argparse.ArgumentParser):

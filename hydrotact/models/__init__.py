@@ -27,8 +27,10 @@ from ._estimator import make_initial_state as make_initial_state
 from ._evaluate import CONTACT_FORCE as CONTACT_FORCE
 from ._evaluate import StreamingEstimator as StreamingEstimator
 from ._evaluate import calc_detection as calc_detection
+from ._evaluate import calc_skin_radius as calc_skin_radius
 from ._evaluate import evaluate_estimator as evaluate_estimator
 from ._evaluate import predict_recording as predict_recording
+from ._export import export_c_header as export_c_header
 from ._loss import DEFAULT_WEIGHTS as DEFAULT_WEIGHTS
 from ._loss import calc_arc_length as calc_arc_length
 from ._loss import calc_loss as calc_loss

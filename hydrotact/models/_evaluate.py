@@ -139,3 +139,18 @@ def evaluate_estimator(trained, blocks: list, rate_hz: float, radius: float | No
         "force_threshold": calc_detection(truth, magnitude > CONTACT_FORCE, rate_hz),
     }
     return {"metrics": metrics, "detection": detection, "predictions": predictions}
+
+
+def calc_skin_radius(sensor, tolerance: float = 0.01) -> float | None:
+    """The radius (m) of a sensor whose touchable skin lies on a sphere about its
+    contact centre (sphere8: 10 mm), else None: the arc-length error of the paper's
+    Eq. 2 is a distance on a sphere. A spread of the corners' distances beyond
+    `tolerance` of their mean (an ellipsoid, a pad) is no sphere."""
+    from ..datasets import find_touchable_skin
+
+    if sensor.contact_center_S is None:
+        return None
+    corners = find_touchable_skin(sensor, sensor.make_mesh(check=False)).corners.reshape(-1, 3)
+    distances = np.linalg.norm(corners - np.asarray(sensor.contact_center_S), axis=1)
+    mean = float(distances.mean())
+    return mean if float(np.ptp(distances)) <= tolerance * mean else None
