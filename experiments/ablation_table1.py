@@ -1,0 +1,196 @@
+"""Table I of the barometric estimation paper, in simulation: binned and plain angle
+heads x our two-layer GRU, the paper's one-layer tanh RNN and its MLP, on sphere8 and
+ellipsoid8, several seeds; then the ageing test of its Fig. 8.
+
+For each sensor a dataset is generated in the paper's regime (`hydrotact.datasets`,
+2500 events by default) with a viscoelastic silicone (E(0) = 3 MPa: E∞ 1.8 MPa and two
+Prony terms, 0.75 MPa at 0.8 s and 0.45 MPa at 12 s). Every model is trained on its
+training split (`hydrotact.models.train_estimator`, the defaults of `hydrotact train`)
+and evaluated on its held-out blocks, each run from the zero state
+(`evaluate_estimator`). Rows: GRU (sized to the 6000-parameter budget), GRU at the
+paper's RNN's parameter count (18 + 18 units), the paper's RNN (48 units) and MLP, each
+binned and plain; the table gives the mean and spread (standard deviation) over seeds.
+
+Ageing (Fig. 8): a second sphere8 dataset from the same seed (same events, same sensor
+variation) with an aged material (E∞ +30 %, the slow term's τ doubled), evaluated by
+the first seed's binned GRU after a tare: each channel shifted by the difference of
+the median no-contact readings of the two datasets' training splits.
+
+Outputs (in --output, default experiments/results/): `ablation_table1.json` (every
+run's metrics, the settings and the timings), `ablation_table1.md` (the table) and
+`ablation_table1.png` (force and angle RMSEs per row). Datasets and training runs are
+kept under `ablation_table1.work/` and resume when the script is run again.
+
+Run: `.venv/bin/python experiments/ablation_table1.py [--events 2500] [--seeds 3] [--smoke]`.
+"""
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import numpy as np  # noqa: E402
+
+from hydrotact._files import atomic_path, write_text_atomic  # noqa: E402
+from hydrotact.data import make_material_document, write_material  # noqa: E402
+from hydrotact.datasets import DatasetConfig, generate_dataset, load_dataset  # noqa: E402
+from hydrotact.models import (  # noqa: E402
+    TrainConfig,
+    calc_skin_radius,
+    count_parameters,
+    evaluate_estimator,
+    make_estimator_spec,
+    train_estimator,
+)
+from hydrotact.sensors import load_sensor  # noqa: E402
+
+NAME = "ablation_table1"
+MATERIAL = (1.8e6, [7.5e5, 4.5e5], [0.8, 12.0])
+AGED = (1.8e6 * 1.3, [7.5e5, 4.5e5], [0.8, 24.0])
+ROWS = (("gru", None, "GRU (budget)"), ("gru", (18, 18), "GRU (= RNN count)"), ("rnn", None, "RNN (paper)"), ("mlp", None, "MLP (paper)"))
+METRICS = ("fx_rmse", "fy_rmse", "fz_rmse", "fn_rmse", "theta_rmse", "phi_rmse", "contact_bce", "arc_length_mean")
+
+def _dataset(folder: Path, sensor: str, material: tuple, events: int, smoke: bool) -> Path:
+    material_file = write_material(folder.parent / f"{folder.name}.material.json", make_material_document(*material, name=folder.name))
+    config = DatasetConfig(events=events, num_rays=16 if smoke else 64, hold_range=(0.3, 0.8) if smoke else (0.5, 5.0))
+    generate_dataset(sensor, folder, material=material_file, config=config, progress=not smoke)
+    return folder
+
+
+def _tare(dataset, reference) -> np.ndarray:
+    """Per channel, the median no-contact reading of `dataset`'s training split minus `reference`'s."""
+    shifts = []
+    for name in dataset.channels:
+        a, b = dataset.arrays("train", [name, "contact"]), reference.arrays("train", [name, "contact"])
+        shifts.append(np.median(a[name][a["contact"] == 0]) - np.median(b[name][b["contact"] == 0]))
+    return np.asarray(shifts)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--events", type=int, default=2500)
+    parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--sensors", default="sphere8,ellipsoid8")
+    parser.add_argument("--max-epochs", type=int, default=TrainConfig().max_epochs)
+    parser.add_argument("--output", type=Path, default=Path(__file__).parent / "results")
+    parser.add_argument("--smoke", action="store_true", help="tiny datasets (sphere8 only), one seed, two epochs: for the tests")
+    args = parser.parse_args()
+    smoke = {}
+    if args.smoke:
+        args.events, args.seeds, args.sensors, args.max_epochs = 24, 1, "sphere8", 2
+        smoke = {"sequence_length": 64, "burn_in": 32, "batch_size": 8}
+    output = args.output
+    work = output / f"{NAME}.work"
+    work.mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
+    runs, timings = [], {}
+    sensors = [name for name in args.sensors.split(",") if name]
+    trained_for_ageing = None
+    for sensor_name in sensors:
+        sensor = load_sensor(sensor_name)
+        t = time.perf_counter()
+        dataset = load_dataset(_dataset(work / f"{sensor_name}_dataset", sensor_name, MATERIAL, args.events, args.smoke))
+        timings[f"generate {sensor_name}"] = time.perf_counter() - t
+        radius = calc_skin_radius(sensor)
+        rate = float(dataset.manifest["config"]["rate_hz"])
+        for architecture, hidden, label in ROWS:
+            for binned in (True, False):
+                for seed in range(args.seeds):
+                    config = TrainConfig(architecture=architecture, binned=binned, hidden=hidden, seed=seed, max_epochs=args.max_epochs, **smoke)
+                    folder = work / f"{sensor_name}_{architecture}{'_' + '-'.join(map(str, hidden)) if hidden else ''}_{'binned' if binned else 'plain'}_{seed}"
+                    folder.mkdir(exist_ok=True)
+                    t = time.perf_counter()
+                    trained = train_estimator(dataset, sensor, config, folder=folder)
+                    seconds = time.perf_counter() - t
+                    result = evaluate_estimator(trained, dataset.blocks("test"), rate, radius)
+                    runs.append({
+                        "sensor": sensor_name, "row": label, "architecture": architecture, "hidden": list(trained.spec.hidden), "binned": binned,
+                        "seed": seed, "parameters": count_parameters(trained.spec), "epochs": len(trained.history), "best_epoch": trained.best_epoch,
+                        "train_seconds": sum(e["seconds"] for e in trained.history), "wall_seconds": seconds,
+                        "metrics": result["metrics"], "detection": {k: v["accuracy"] for k, v in result["detection"].items()},
+                    })
+                    print(f"{sensor_name} {label} {'binned' if binned else 'plain'} seed {seed}: {runs[-1]['parameters']} parameters, "
+                          + ", ".join(f"{k} {v:.3g}" for k, v in result["metrics"].items()), flush=True)
+                    if sensor_name == "sphere8" and architecture == "gru" and hidden is None and binned and seed == 0:
+                        trained_for_ageing = (trained, dataset)
+    ageing = None
+    if trained_for_ageing is not None:
+        trained, dataset = trained_for_ageing
+        aged = load_dataset(_dataset(work / "sphere8_aged_dataset", "sphere8", AGED, args.events, args.smoke))
+        shift = _tare(aged, dataset)
+        rate = float(aged.manifest["config"]["rate_hz"])
+        radius = calc_skin_radius(load_sensor("sphere8"))
+        tared = [block | {name: block[name] - s for name, s in zip(trained.channels, shift)} for block in aged.blocks("test")]
+        ageing = {
+            "material": {"fresh": MATERIAL, "aged": AGED}, "tare_Pa": shift.tolist(),
+            "fresh": evaluate_estimator(trained, dataset.blocks("test"), rate, radius)["metrics"],
+            "aged_untared": evaluate_estimator(trained, aged.blocks("test"), rate, radius)["metrics"],
+            "aged_tared": evaluate_estimator(trained, tared, rate, radius)["metrics"],
+        }
+    table = _table(runs)
+    document = {
+        "settings": {"events": args.events, "seeds": args.seeds, "sensors": sensors, "max_epochs": args.max_epochs, "smoke": args.smoke, "material": MATERIAL},
+        "runs": runs, "table": table, "ageing": ageing, "timings_s": timings | {"total": time.perf_counter() - started},
+        "budgets": {s: {label: count_parameters(make_estimator_spec(load_sensor(s), a, True, h)) for a, h, label in ROWS} for s in sensors},
+    }
+    output.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(output / f"{NAME}.json", json.dumps(document, indent=2) + "\n")
+    write_text_atomic(output / f"{NAME}.md", _markdown(table, ageing))
+    _plot(table, output / f"{NAME}.png")
+    print(_markdown(table, ageing))
+    print(f"written {output / NAME}.json, .md, .png")
+
+
+def _table(runs: list) -> list:
+    rows = {}
+    for run in runs:
+        rows.setdefault((run["sensor"], run["row"], run["binned"]), []).append(run)
+    table = []
+    for (sensor, label, binned), members in rows.items():
+        entry = {"sensor": sensor, "row": label, "binned": binned, "parameters": members[0]["parameters"], "seeds": len(members)}
+        for name in METRICS:
+            values = [m["metrics"][name] for m in members if name in m["metrics"]]
+            if values:
+                entry[name] = {"mean": float(np.mean(values)), "std": float(np.std(values))}
+        table.append(entry)
+    return table
+
+
+def _markdown(table: list, ageing) -> str:
+    head = "| sensor | model | angles | parameters | " + " | ".join(METRICS) + " |\n|---|---|---|---:|" + "---:|" * len(METRICS) + "\n"
+    cell = lambda e, n: f"{e[n]['mean']:.3g} ± {e[n]['std']:.2g}" if n in e else "-"
+    body = "".join(f"| {e['sensor']} | {e['row']} | {'binned' if e['binned'] else 'plain'} | {e['parameters']} | " + " | ".join(cell(e, n) for n in METRICS) + " |\n" for e in table)
+    text = "RMSE in N (forces) and rad (angles); arc length in m; mean ± standard deviation over seeds.\n\n" + head + body
+    if ageing:
+        cases = [(k, ageing[k]) for k in ("fresh", "aged_untared", "aged_tared")]
+        text += "\nAgeing (sphere8, binned GRU, seed 0): " + "; ".join(f"{k}: Fn RMSE {v['fn_rmse']:.3g} N, theta RMSE {v['theta_rmse']:.3g} rad" for k, v in cases) + "\n"
+    return text
+
+
+def _plot(table: list, path: Path) -> None:
+    from matplotlib.figure import Figure
+
+    labels = [f"{e['sensor']}\n{e['row']}\n{'binned' if e['binned'] else 'plain'}" for e in table]
+    figure = Figure(figsize=(max(8.0, 0.9 * len(table) + 3), 4.5))
+    axes = figure.subplots(1, 2)
+    x = np.arange(len(table))
+    for axis, names, unit in ((axes[0], ("fx_rmse", "fy_rmse", "fz_rmse", "fn_rmse"), "N"), (axes[1], ("theta_rmse", "phi_rmse"), "rad")):
+        for k, name in enumerate(names):
+            means = [e[name]["mean"] if name in e else np.nan for e in table]
+            spread = [e[name]["std"] if name in e else 0.0 for e in table]
+            axis.bar(x + (k - len(names) / 2 + 0.5) * 0.8 / len(names), means, 0.8 / len(names), yerr=spread, label=name.removesuffix("_rmse"))
+        axis.set_xticks(x, labels, fontsize=6)
+        axis.set_ylabel(f"held-out RMSE ({unit})")
+        axis.legend(fontsize=7)
+    figure.tight_layout()
+    with atomic_path(path) as tmp:
+        figure.savefig(tmp, dpi=130)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
