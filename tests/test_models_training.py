@@ -111,14 +111,14 @@ def test_sequences_with_burn_in_cover_each_label_once_and_windows_match_the_pape
 
 # --- training on a tiny generated dataset ------------------------------------------
 
-TINY = ["--sensor", "sphere8", "--events", "40", "--seed", "5", "--rays", "16", "--hold-range", "0.3,0.8", "--gap-range", "0.2,0.4",
+TINY = ["--sensor", "sphere8", "--events", "16", "--seed", "5", "--rays", "8", "--hold-range", "0.3,0.8", "--gap-range", "0.2,0.4",
         "--speed-range", "0.01,0.02", "--force-range", "0.2,4", "--noise", "2", "--no-plots", "--json"]
 QUICK = dict(hidden=(8, 8), sequence_length=64, burn_in=32, batch_size=8, learning_rate=1e-2, max_epochs=12, patience=12)
 
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
-    """A 40-event sphere8 dataset (about 4 min of session), generated in this process."""
+    """A 16-event sphere8 dataset (about 1.5 min of session), generated in this process."""
     from hydrotact.cli import main
 
     folder = tmp_path_factory.mktemp("tiny") / "dataset"

@@ -5,6 +5,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).parents[1]
@@ -43,3 +44,21 @@ def test_probe_sweep_smoke(tmp_path):
         assert 1.0 < centre["fwhm_mm"] < 4.0, (name, centre)
         # 16 rays against 64 at the positions both ran (footprint rays: 5 % of the peak at most)
         assert 0.0 < centre["max_difference_from_reference_of_peak"] < 0.08, (name, centre)
+
+
+def test_ablation_table1_smoke(tmp_path):
+    result = subprocess.run(
+        [sys.executable, str(ROOT / "experiments" / "ablation_table1.py"), "--smoke", "--output", str(tmp_path)],
+        capture_output=True, text=True, timeout=1800,
+    )
+    assert result.returncode == 0, result.stderr[-3000:]
+    report = json.loads((tmp_path / "ablation_table1.json").read_text())
+    assert (tmp_path / "ablation_table1.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    rows = {(entry["row"], entry["binned"]) for entry in report["table"]}
+    assert len(rows) == 8  # four models, binned and plain
+    for entry in report["table"]:
+        assert entry["parameters"] <= 6000 and all(np.isfinite(entry[name]["mean"]) for name in ("fx_rmse", "fn_rmse", "theta_rmse", "contact_bce"))
+    paper_rnn = next(e for e in report["table"] if e["row"] == "RNN (paper)" and e["binned"])
+    assert paper_rnn["parameters"] == 4205  # the paper's Binned RNN on the sphere
+    assert set(report["ageing"]) >= {"fresh", "aged_untared", "aged_tared"}
+    assert "| sphere8 | GRU (budget) | binned |" in (tmp_path / "ablation_table1.md").read_text()
