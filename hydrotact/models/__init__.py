@@ -43,4 +43,6 @@ from ._sequences import make_sequences as make_sequences
 from ._train import SCHEDULES as SCHEDULES
 from ._train import TrainConfig as TrainConfig
 from ._train import TrainedEstimator as TrainedEstimator
+from ._train import fine_tune_estimator as fine_tune_estimator
+from ._train import join_recordings as join_recordings
 from ._train import train_estimator as train_estimator

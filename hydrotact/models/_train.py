@@ -29,7 +29,7 @@ import numpy as np
 import optax
 
 from .._errors import HydrotactError
-from .._files import atomic_path
+from .._files import atomic_path, digest
 from ._estimator import EstimatorSpec, calc_estimator_sequence, check_budget, init_estimator, make_estimator_spec
 from ._loss import DEFAULT_WEIGHTS, calc_loss, calc_table_metrics
 from ._sequences import Normaliser, make_sequences
@@ -142,8 +142,9 @@ def _make_functions(spec: EstimatorSpec, optimiser, weights: dict):
     return step, evaluate
 
 
-def _request(config: TrainConfig, dataset) -> str:
-    return json.dumps({"config": config.to_json(), "dataset": dataset.manifest.get("request_digest"), "rows": dataset.num_rows}, sort_keys=True)
+def _request(config: TrainConfig, data: dict) -> str:
+    """What a checkpoint belongs to: the settings and the data (a resumed run must match)."""
+    return json.dumps({"config": config.to_json(), "data": data}, sort_keys=True)
 
 
 def _load_checkpoint(path: Path, request: str):
@@ -162,8 +163,6 @@ def train_estimator(dataset, sensor, config: TrainConfig | None = None, folder=N
     `sensor` (a :class:`hydrotact.sensors.SensorSpec`: its angle ranges size the
     bins). With `folder`, resumable (see the module); `on_epoch(entry)` after each
     epoch's checkpoint. Returns a TrainedEstimator."""
-    from tqdm.auto import tqdm
-
     config = config or TrainConfig()
     spec = make_estimator_spec(sensor, config.architecture, config.binned, config.hidden, config.cover)
     check_budget(spec)
@@ -175,6 +174,51 @@ def train_estimator(dataset, sensor, config: TrainConfig | None = None, folder=N
     if not train or not held_out:
         raise HydrotactError(f"{dataset.folder}: training needs both a train and a test split")
     normaliser = Normaliser.fit(np.column_stack([train[name] for name in channels]))
+    params = init_estimator(spec, jax.random.PRNGKey(config.seed))
+    request = _request(config, {"dataset": dataset.manifest.get("request_digest"), "rows": dataset.num_rows})
+    return _fit(spec, params, normaliser, channels, train, held_out, config, folder, progress, on_epoch, request)
+
+
+def join_recordings(blocks: list) -> dict:
+    """Recordings (dicts of equal-length columns) as one set of arrays with
+    `block_starts`, as :meth:`Dataset.arrays` gives them."""
+    names = set.intersection(*(set(block) for block in blocks))
+    joined = {name: np.concatenate([np.asarray(block[name]) for block in blocks]) for name in names}
+    joined["block_starts"] = np.cumsum([0] + [len(block["time"]) for block in blocks])[:-1]
+    return joined
+
+
+def fine_tune_estimator(
+    trained: TrainedEstimator, train_blocks: list, validation_blocks: list, config: TrainConfig | None = None,
+    renormalise: bool = True, folder=None, progress: bool = False, on_epoch=None,
+) -> TrainedEstimator:
+    """Continue training a pretrained estimator on a few recordings of a real sensor
+    (dicts of columns: its channels and the labels, e.g. `BarometerLog.columns`),
+    validated on `validation_blocks`. The model keeps its architecture; the optimiser
+    settings and stopping come from `config` (its model fields are ignored). With
+    `renormalise`, the inputs are normalised with the new recordings' statistics (a
+    sensor's offsets and gains differ from unit to unit), else with the pretrained ones."""
+    config = config or TrainConfig()
+    channels = trained.channels
+    for k, block in enumerate([*train_blocks, *validation_blocks]):
+        missing = [name for name in (*channels, "fx", "fy", "fz", "fn", "contact") if name not in block]
+        if missing:
+            raise HydrotactError(f"recording {k + 1}: no column {missing[0]!r}; fine-tuning needs the channels {', '.join(channels)} and the force and contact labels")
+    train, held_out = join_recordings(train_blocks), join_recordings(validation_blocks)
+    normaliser = Normaliser.fit(np.column_stack([train[name] for name in channels])) if renormalise else trained.normaliser
+    config = dataclasses.replace(config, architecture=trained.spec.architecture, binned=trained.spec.binned, hidden=trained.spec.hidden)
+    data = _digest_arrays([train[name] for name in sorted(train)] + [held_out[name] for name in sorted(held_out)])
+    request = _request(config, {"fine_tune": data, "pretrained": _digest_arrays(_flat(trained.params)), "renormalise": renormalise})
+    return _fit(trained.spec, trained.params, normaliser, channels, train, held_out, config, folder, progress, on_epoch, request)
+
+
+def _digest_arrays(arrays: list) -> str:
+    return digest(*(part for array in arrays for part in (str((np.asarray(array).dtype, np.shape(array))), np.ascontiguousarray(array).tobytes())))
+
+
+def _fit(spec, params, normaliser, channels, train, held_out, config, folder, progress, on_epoch, request) -> TrainedEstimator:
+    from tqdm.auto import tqdm
+
     inputs, targets = make_sequences(train, channels, normaliser, config.sequence_length, config.burn_in)
     valid_inputs, valid_targets = make_sequences(held_out, channels, normaliser, config.sequence_length, config.burn_in)
     valid_inputs, valid_targets = jnp.asarray(valid_inputs), {k: jnp.asarray(v) for k, v in valid_targets.items()}
@@ -183,11 +227,9 @@ def train_estimator(dataset, sensor, config: TrainConfig | None = None, folder=N
     optimiser = _make_optimiser(config, steps_per_epoch)
     step, evaluate = _make_functions(spec, optimiser, dict(config.weights))
 
-    params = init_estimator(spec, jax.random.PRNGKey(config.seed))
     state = optimiser.init(params)
     best, best_loss, best_epoch, history, epoch = params, np.inf, -1, [], 0
     path = None if folder is None else Path(folder) / CHECKPOINT
-    request = _request(config, dataset)
     if path is not None and not path.is_file() and (path.parent / "model.json").is_file():
         raise HydrotactError(f"{path.parent}: holds a trained model without its checkpoint; train into another folder (nothing was changed)")
     if path is not None and path.is_file():
