@@ -252,24 +252,34 @@ int main(void) {
 """
 
 
-def test_the_c_export_compiles_and_matches_jax(tiny, trained, tmp_path):
+@pytest.mark.parametrize("variant", ["gru binned (trained)", "gru plain", "rnn binned", "mlp plain"])
+def test_the_c_export_compiles_and_matches_jax(tiny, trained, tmp_path, variant):
+    import dataclasses
     import shutil
     import subprocess
 
+    from hydrotact.models import init_estimator
+
+    model = trained
+    if variant != "gru binned (trained)":
+        architecture, binned = variant.split()
+        spec = make_estimator_spec(load_sensor("sphere8"), architecture, binned == "binned")
+        model = dataclasses.replace(trained, spec=spec, params=init_estimator(spec, jax.random.PRNGKey(3)))
     compiler = shutil.which("cc") or shutil.which("gcc")
     assert compiler, "no C compiler on this machine"
-    summary = export_c_header(trained, tmp_path / "model.h", "sphere8")
-    assert summary["flash_bytes"] == 4 * (summary["parameters"] + 3 * 8 + trained.spec.theta_bins.count + trained.spec.phi_bins.count)
+    summary = export_c_header(model, tmp_path / "model.h", "sphere8")
+    bins = model.spec.theta_bins.count + model.spec.phi_bins.count if model.spec.binned else 0
+    assert summary["flash_bytes"] == 4 * (summary["parameters"] + 3 * 8 + bins)
     (tmp_path / "main.c").write_text(C_MAIN)
     build = subprocess.run([compiler, "-std=c99", "-O2", "-Wall", "-Werror", "-o", str(tmp_path / "step"), str(tmp_path / "main.c"), "-lm"], capture_output=True, text=True, cwd=tmp_path)
     assert build.returncode == 0, build.stderr
     block = tiny.blocks("test")[0]
-    readings = np.column_stack([block[name] for name in trained.channels])[:400].astype(np.float32)
+    readings = np.column_stack([block[name] for name in model.channels])[:400].astype(np.float32)
     text = f"{len(readings)}\n" + "\n".join(" ".join(f"{v!r}" for v in row.tolist()) for row in readings) + "\n"
     run = subprocess.run([str(tmp_path / "step")], input=text, capture_output=True, text=True, timeout=60)
     assert run.returncode == 0, run.stderr
     c = np.loadtxt(run.stdout.splitlines())
-    jax_out = predict_recording(trained, readings.astype(np.float64))
+    jax_out = predict_recording(model, readings.astype(np.float64))
     expected = np.column_stack([jax_out[name] for name in ("fx", "fy", "fz", "fn", "theta", "phi", "contact_probability")])
     np.testing.assert_allclose(c, expected, rtol=1e-5, atol=1e-5)
 

@@ -72,7 +72,7 @@ def export_c_header(trained, path, sensor_name: str = "") -> dict:
         "static inline float hydrotact_sigmoid(float x) { return 1.0f / (1.0f + expf(-x)); }", "",
         "/* One sample of readings (Pa, channel order) in; the estimates out; the state carried. */",
         "static void hydrotact_step(hydrotact_state *state, const float *readings, hydrotact_output *out) {",
-        f"  float x[{max(sizes)}], gi[{widest}], gh[{widest}], raw[{spec.num_outputs}];",
+        f"  float x[{max(sizes)}], gi[{widest}], raw[{spec.num_outputs}];" + (f" float gh[{widest}];" if spec.recurrent else ""),
         f"  for (int j = 0; j < {spec.num_inputs}; ++j) x[j] = ((readings[j] - hydrotact_mean_hi[j]) - hydrotact_mean_lo[j]) * hydrotact_inv_std[j];",
     ]
     for k, (a, h) in enumerate(zip(sizes[:-1], sizes[1:])):

@@ -221,6 +221,8 @@ def _fit(spec, params, normaliser, channels, train, held_out, config, folder, pr
 
     inputs, targets = make_sequences(train, channels, normaliser, config.sequence_length, config.burn_in)
     valid_inputs, valid_targets = make_sequences(held_out, channels, normaliser, config.sequence_length, config.burn_in)
+    if not len(inputs) or not len(valid_inputs):
+        raise HydrotactError("training needs samples in both the training and the validation recordings")
     valid_inputs, valid_targets = jnp.asarray(valid_inputs), {k: jnp.asarray(v) for k, v in valid_targets.items()}
     batch = min(config.batch_size, len(inputs))
     steps_per_epoch = len(inputs) // batch
