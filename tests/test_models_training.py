@@ -244,7 +244,8 @@ def test_evaluation_on_the_held_out_blocks(tiny, trained):
     result = evaluate_estimator(trained, tiny.blocks("test"), tiny.manifest["config"]["rate_hz"], radius=0.01)
     assert set(result["metrics"]) >= {"fx_rmse", "fy_rmse", "fz_rmse", "fn_rmse", "theta_rmse", "phi_rmse", "contact_bce", "arc_length_mean"}
     assert all(np.isfinite(v) for v in result["metrics"].values())
-    assert result["detection"]["contact_head"]["accuracy"] > 0.7
+    truth = np.concatenate([block["contact"] for block in tiny.blocks("test")])
+    assert result["detection"]["contact_head"]["accuracy"] > max(truth.mean(), 1 - truth.mean())  # better than always one answer
     assert len(result["predictions"]) == len(tiny.blocks("test"))
 
 

@@ -64,4 +64,7 @@ def calc_bin_index(bins: AngleBins, angle):
 
 def decode_bins(bins: AngleBins, logits):
     """Eq. 1: the softmax-weighted mean of the bin centres. `logits` (..., count)."""
-    return jax.nn.softmax(logits, axis=-1) @ jnp.asarray(bins.centres, dtype=logits.dtype)
+    # A sum per row, not a matrix product: one sample decodes to the same bits alone
+    # (streaming) as in a batch (a matrix-vector product's blocking differs with the rows).
+    centres = jnp.asarray(bins.centres, dtype=logits.dtype).reshape((1,) * (logits.ndim - 1) + (-1,))
+    return jnp.sum(jax.nn.softmax(logits, axis=-1) * centres, axis=-1)
