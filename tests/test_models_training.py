@@ -131,13 +131,16 @@ def trained(tiny):
     return train_estimator(tiny, load_sensor("sphere8"), TrainConfig(**QUICK))
 
 
-def test_training_lowers_every_loss_term_and_beats_a_constant_predictor(tiny, trained):
-    """On the data it was trained on (a dozen presses cannot teach the places of the
-    held-out ones: generalisation is the ablation's to show): every loss term is lower
-    than at the initialisation, and every Table I metric beats the constant predictor
-    (the training means of the forces and, over contact, the angles; the contact rate)."""
+def test_training_lowers_every_loss_term_and_beats_a_constant_predictor(tiny):
+    """On the data it was trained on, with the last epoch's parameters (a dozen presses
+    cannot teach the places of the held-out ones, so the best validation epoch is an
+    early one; generalisation is the ablation's to show): every loss term is lower than
+    at the initialisation, and every Table I metric beats the constant predictor (the
+    training means of the forces and, over contact, the angles; the contact rate)."""
     from hydrotact.models import init_estimator
 
+    trained = train_estimator(tiny, load_sensor("sphere8"), TrainConfig(**(QUICK | {"restore_best": False})))
+    assert trained.best_epoch < len(trained.history) - 1
     spec, config = trained.spec, trained.config
     train = tiny.arrays("train")
     inputs, targets = make_sequences(train, trained.channels, trained.normaliser, config.sequence_length, config.burn_in)

@@ -43,6 +43,7 @@ def add_parser(subparsers):
     parser.add_argument("--schedule", choices=SCHEDULES, default=default("schedule"), help=f"learning-rate schedule over --max-epochs (default {default('schedule')})")
     parser.add_argument("--max-epochs", type=int, default=default("max_epochs"), metavar="N", help=f"the most epochs (default {default('max_epochs')})")
     parser.add_argument("--patience", type=int, default=default("patience"), metavar="N", help=f"stop after this many epochs without a better validation loss (default {default('patience')})")
+    parser.add_argument("--last-epoch", action="store_true", help="keep the last epoch's parameters, not the best validation epoch's")
     parser.add_argument("--seed", type=int, default=default("seed"), metavar="K", help=f"seed of the initialisation and the shuffles (default {default('seed')})")
     parser.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="the model folder")
     parser.add_argument("--no-plots", action="store_true", help="skip the training-curve PNG")
@@ -58,7 +59,7 @@ def run(args) -> None:
     config = TrainConfig(
         architecture=args.architecture, binned=not args.plain, hidden=args.hidden, cover=args.cover, sequence_length=args.sequence_length,
         burn_in=args.burn_in, batch_size=args.batch_size, learning_rate=args.learning_rate, schedule=args.schedule,
-        max_epochs=args.max_epochs, patience=args.patience, seed=args.seed,
+        max_epochs=args.max_epochs, patience=args.patience, restore_best=not args.last_epoch, seed=args.seed,
     )
     dataset = load_dataset(args.dataset)
     sensor = load_sensor(dataset.manifest["sensor"]["spec"])

@@ -49,7 +49,9 @@ class TrainConfig:
     `learning_rate`, `schedule` ("constant" or "cosine" over `max_epochs`),
     `clip_norm` (global gradient norm), loss `weights` (force, angle, contact; the
     paper's contact weight of 10). **Stopping:** `max_epochs`, `patience` (epochs
-    without a better validation loss). `seed` of the initialisation and the shuffles.
+    without a better validation loss), `restore_best` (keep the best validation
+    epoch's parameters, the default, or the last epoch's). `seed` of the
+    initialisation and the shuffles.
     """
 
     architecture: str = "gru"
@@ -65,6 +67,7 @@ class TrainConfig:
     weights: tuple = tuple(DEFAULT_WEIGHTS.items())
     max_epochs: int = 100
     patience: int = 8
+    restore_best: bool = True
     seed: int = 0
 
     def __post_init__(self):
@@ -90,7 +93,8 @@ class TrainConfig:
 
 @dataclasses.dataclass(frozen=True)
 class TrainedEstimator:
-    """A trained estimator: its `spec`, `params` (the best epoch's), the input
+    """A trained estimator: its `spec`, `params` (the best epoch's, or the last's
+    where the config does not `restore_best`), the input
     `normaliser` and `channels` (dataset columns, in input order), the `config`, and
     the `history` (per epoch: training and validation loss and terms, validation
     Table I metrics, seconds), `best_epoch` and why it `stopped`."""
@@ -276,4 +280,5 @@ def _fit(spec, params, normaliser, channels, train, held_out, config, folder, pr
                     np.savez(tmp, request=np.asarray(request), history=np.asarray(json.dumps(history)), best_loss=best_loss, best_epoch=best_epoch, **arrays)
             if on_epoch is not None:
                 on_epoch(entry)
-    return TrainedEstimator(spec, best, normaliser, channels, config, history, best_epoch, stopped)
+    kept = best if config.restore_best else params
+    return TrainedEstimator(spec, kept, normaliser, channels, config, history, best_epoch, stopped)
