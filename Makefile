@@ -30,6 +30,9 @@ demo: $(VENV)/.installed
 # file's output is printed whole when it ends, longest files first so the run ends
 # together. pytest exits 5 when it collected no tests: that is a failure here, like any
 # non-zero status, and any failing file fails the run (and is named at the end).
+# All test processes share one persistent XLA compilation cache, made anew each run
+# (locked: its size is bounded): files, notebooks and experiments compile many of the
+# same programs.
 TEST_JOBS ?= 2
 TEST_LOGS := .pytest-logs
 TEST_FIRST := tests/test_contact.py tests/test_datasets.py tests/test_taxel.py tests/test_forward_model.py tests/test_notebooks_and_experiments.py tests/test_press_fit.py
@@ -38,7 +41,7 @@ TEST_FILES := $(TEST_FIRST) $(filter-out $(TEST_FIRST),$(sort $(wildcard tests/t
 test: $(VENV)/.installed-test
 	$(BIN)/ruff check .
 	@rm -rf $(TEST_LOGS) && mkdir -p $(TEST_LOGS)
-	@printf '%s\n' $(TEST_FILES) | xargs -P $(TEST_JOBS) -I FILE sh -c '\
+	@export JAX_COMPILATION_CACHE_DIR=$(CURDIR)/$(TEST_LOGS)/xla-cache JAX_COMPILATION_CACHE_MAX_SIZE=4000000000; printf '%s\n' $(TEST_FILES) | xargs -P $(TEST_JOBS) -I FILE sh -c '\
 	    log=$(TEST_LOGS)/$$(basename FILE .py).log; echo "== FILE started"; \
 	    $(BIN)/python -m pytest --durations=8 FILE > $$log 2>&1; status=$$?; \
 	    echo "== FILE (exit $$status)"; cat $$log; \

@@ -57,7 +57,9 @@ METRICS = ("fx_rmse", "fy_rmse", "fz_rmse", "fn_rmse", "theta_rmse", "phi_rmse",
 
 def _dataset(folder: Path, sensor: str, material: tuple, events: int, smoke: bool) -> Path:
     material_file = write_material(folder.parent / f"{folder.name}.material.json", make_material_document(*material, name=folder.name))
-    config = DatasetConfig(events=events, num_rays=16 if smoke else 64, hold_range=(0.3, 0.8) if smoke else (0.5, 5.0))
+    # Smoke: the test suite's tiny regime (8 rays, short holds and gaps, fast presses).
+    quick = dict(num_rays=8, hold_range=(0.3, 0.8), gap_range=(0.2, 0.4), speed_range=(0.01, 0.02), force_range=(0.2, 4.0))
+    config = DatasetConfig(events=events, **(quick if smoke else {}))
     generate_dataset(sensor, folder, material=material_file, config=config, progress=not smoke)
     return folder
 
@@ -82,7 +84,7 @@ def main() -> None:
     args = parser.parse_args()
     smoke = {}
     if args.smoke:
-        args.events, args.seeds, args.sensors, args.max_epochs = 24, 1, "sphere8", 2
+        args.events, args.seeds, args.sensors, args.max_epochs = 12, 1, "sphere8", 2
         smoke = {"sequence_length": 64, "burn_in": 32, "batch_size": 8}
     output = args.output
     work = output / f"{NAME}.work"

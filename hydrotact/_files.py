@@ -73,7 +73,8 @@ def write_text_atomic(path, text: str) -> None:
 
 
 def cache_dir() -> Path:
-    """Where hydrotact caches meshes: $HYDROTACT_CACHE_DIR, else ~/.cache/hydrotact."""
+    """Where hydrotact caches meshes and (the command's) compiled XLA programs:
+    $HYDROTACT_CACHE_DIR, else ~/.cache/hydrotact."""
     root = os.environ.get("HYDROTACT_CACHE_DIR")
     if root:
         return Path(root)
