@@ -75,6 +75,7 @@ def _reach(curve, level: float):
 
 
 C_MAIN = r"""
+#define _POSIX_C_SOURCE 199309L /* clock_gettime under -std=c99 */
 #include <stdio.h>
 #include <time.h>
 #include "model.h"
