@@ -8,12 +8,16 @@ alone, never on the number of devices or workers:
 - a batch is cut into slices of `CHUNK` poses (the last one padded with its last
   pose), and every call computes one slice per device: one compiled program of one
   shape on one device, four, or a Ray worker;
-- each slice starts from the same buffer sizes (:data:`START_CAPACITY`) and, while
-  any of its poses overflows, is computed again with the buffers grown to what its
-  overflowing poses needed (:meth:`hydrotact._buffers.AbstractCapacity.grown_to`).
+- each slice starts from the bottom of one ladder of buffer sizes
+  (:data:`CAPACITY_LADDER`) and, while any of its poses overflows, is computed again
+  on the lowest rung that holds what its overflowing poses needed (past the top rung,
+  the buffers grown to those needs, :meth:`hydrotact._buffers.AbstractCapacity.grown_to`).
   So a slice's capacity is a function of its poses, and a slice of easy poses is not
   made to pay for a hard one elsewhere in the batch (a tilted press near the base of
-  a curved sensor can need 20x the buffers of a press on top).
+  a curved sensor can need 20x the buffers of a press on top). A pose's cost is its
+  buffers' size, not what it touches (benchmarks/RESULTS.md), and the rungs are few,
+  each compiled once: per-buffer sizes chosen freely made so many combinations that
+  compiling them cost more than the small buffers saved (measured).
 
 Locally each device gets one slice at a time, all dispatched at once (JAX runs them
 concurrently): every device runs the same single-device program. Not `shard_map` over a
@@ -39,9 +43,13 @@ CHUNK = 64
 RAY_SLICES = 4
 """The most slices per Ray task (fewer when there are fewer slices than the cluster has CPUs)."""
 
-START_CAPACITY = SimCapacity(tets=1024, others=1536, pairs=8192, polygons=2048, taxel_pairs=4096, taxel_pieces=8192)
-"""The buffers every slice starts from: enough for most presses of a 3 mm sphere on the
-built-in sensors (measured), so that few slices compile or compute twice."""
+FULL_CAPACITY = SimCapacity(tets=1024, others=1536, pairs=8192, polygons=2048, taxel_pairs=4096, taxel_pieces=8192)
+"""Buffers that hold most presses of a 3 mm sphere on the built-in sensors (measured)."""
+
+CAPACITY_LADDER = tuple(SimCapacity(*(size << 2 >> k for size in FULL_CAPACITY.sizes)) for k in range(4, -1, -1))
+"""The rungs a slice climbs: FULL_CAPACITY times 1/4 (a press 0.1 mm deep fits), 1/2,
+1, 2 and 4. A slice computes on the bottom rung first, which costs about a seventh of
+FULL_CAPACITY's (measured: 237 against 51 poses/s at 1/4 and 1)."""
 
 _FIELDS = tuple(field.name for field in dataclasses.fields(UnitResponse))
 
@@ -62,6 +70,18 @@ def _rounded(capacity: SimCapacity) -> SimCapacity:
     return SimCapacity(*(1 << (int(size) - 1).bit_length() for size in capacity.sizes))
 
 
+def _next_capacity(capacity: SimCapacity, needed: np.ndarray) -> SimCapacity:
+    """Where a slice that overflowed at `capacity` computes next: the lowest rung of
+    CAPACITY_LADDER above it that holds `needed` (rows of overflowing poses), else
+    (past the top) the buffers grown to those needs."""
+    most = np.max(np.reshape(needed, (-1, len(capacity.sizes))), axis=0)
+    above = CAPACITY_LADDER[CAPACITY_LADDER.index(capacity) + 1 :] if capacity in CAPACITY_LADDER else ()
+    for rung in above:
+        if all(int(n) <= size for n, size in zip(most, rung.sizes)):
+            return rung
+    return _rounded(capacity.grown_to(needed))
+
+
 def _slices(rows: np.ndarray) -> np.ndarray:
     """(S, CHUNK, 6): the rows cut into slices, the last padded with its last pose."""
     count = len(rows)
@@ -72,11 +92,12 @@ def _slices(rows: np.ndarray) -> np.ndarray:
 def compute_slices(model, probe, slices: np.ndarray, num_devices: int | None = None) -> dict:
     """Unit responses (a dict of NumPy arrays (S, CHUNK, ...), UnitResponse's fields)
     of the pose slices (S, CHUNK, 6), each slice grown on its own from
-    START_CAPACITY until none of its poses overflows, one slice per device at a time."""
+    CAPACITY_LADDER's bottom rung until none of its poses overflows, one slice per
+    device at a time."""
     devices = jax.local_devices()[: num_devices or len(jax.local_devices())]
     placed = [(jax.device_put(model, device), jax.device_put(probe, device)) for device in devices]
     count = len(slices)
-    capacities = [START_CAPACITY] * count
+    capacities = [CAPACITY_LADDER[0]] * count
     results: list = [None] * count
     pending = list(range(count))
     while pending:
@@ -94,7 +115,7 @@ def compute_slices(model, probe, slices: np.ndarray, num_devices: int | None = N
                     arrays = {name: np.asarray(getattr(unit, name)) for name in _FIELDS}
                     overflow = arrays["did_overflow"]
                     if overflow.any():
-                        capacities[s] = _rounded(capacity.grown_to(arrays["needed"][overflow]))
+                        capacities[s] = _next_capacity(capacity, arrays["needed"][overflow])
                         pending.append(s)
                     else:
                         results[s] = arrays
