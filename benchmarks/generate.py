@@ -127,7 +127,7 @@ def _full(folder: Path) -> dict:
     from hydrotact.data import make_material_document, write_material
     from hydrotact.datasets import generate_dataset
 
-    material = write_material(folder / "material.json", make_material_document(1.8e6, [7.5e5, 4.5e5], [0.8, 12.0], name="benchmark silicone"))
+    material = write_material(folder / "material.json", make_material_document(6e6, [2.5e6, 1.5e6], [0.8, 12.0], name="benchmark silicone"))
     start = time.perf_counter()
     manifest = generate_dataset("sphere8", folder / "sphere8_seed_scale", material=material, progress=True)
     from hydrotact.datasets import load_dataset

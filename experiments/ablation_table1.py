@@ -3,8 +3,8 @@ heads x our two-layer GRU, the paper's one-layer tanh RNN and its MLP, on sphere
 ellipsoid8, several seeds; then the ageing test of its Fig. 8.
 
 For each sensor a dataset is generated in the paper's regime (`hydrotact.datasets`,
-2500 events by default) with a viscoelastic silicone (E(0) = 3 MPa: E∞ 1.8 MPa and two
-Prony terms, 0.75 MPa at 0.8 s and 0.45 MPa at 12 s). Every model is trained on its
+2500 events by default) with a viscoelastic silicone (E(0) = 10 MPa, the generator's default modulus: E∞ 6 MPa
+and two Prony terms, 2.5 MPa at 0.8 s and 1.5 MPa at 12 s). Every model is trained on its
 training split (`hydrotact.models.train_estimator`, the defaults of `hydrotact train`)
 and evaluated on its held-out blocks, each run from the zero state
 (`evaluate_estimator`). Rows: GRU (sized to the 6000-parameter budget), GRU at the
@@ -50,8 +50,8 @@ from hydrotact.models import (  # noqa: E402
 from hydrotact.sensors import load_sensor  # noqa: E402
 
 NAME = "ablation_table1"
-MATERIAL = (1.8e6, [7.5e5, 4.5e5], [0.8, 12.0])
-AGED = (1.8e6 * 1.3, [7.5e5, 4.5e5], [0.8, 24.0])
+MATERIAL = (6e6, [2.5e6, 1.5e6], [0.8, 12.0])
+AGED = (6e6 * 1.3, [2.5e6, 1.5e6], [0.8, 24.0])
 ROWS = (("gru", None, "GRU (budget)"), ("gru", (18, 18), "GRU (= RNN count)"), ("rnn", None, "RNN (paper)"), ("mlp", None, "MLP (paper)"))
 METRICS = ("fx_rmse", "fy_rmse", "fz_rmse", "fn_rmse", "theta_rmse", "phi_rmse", "contact_bce", "arc_length_mean")
 

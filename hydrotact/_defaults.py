@@ -7,12 +7,14 @@ the scale of every pressure. 1 MPa is a typical hydroelastic modulus of a soft s
 skin (of the order of its Young's modulus); set your own with `--modulus` or a
 material.json (e.g. from `hydrotact fit`). Exported as `hydrotact.field.DEFAULT_MODULUS`."""
 
-DEFAULT_DATASET_MODULUS = 3e6
+DEFAULT_DATASET_MODULUS = 1e7
 """The hydroelastic modulus (Pa) of `hydrotact generate` without a material, chosen for
-the barometric estimation paper's data-collection regime on the built-in curved
-sensors: at 3 MPa a 3 mm sphere reaches the paper's 8 N within half the elastomer's
-thickness (measured along the inward normal at six points of sphere8: 3.2-3.4 N at
-6 mm on top at 1 MPa, and the force is linear in E), where at 1 MPa it reaches only
-3-4 N on top. A bonded, nearly incompressible silicone layer is stiffer in the
-hydroelastic sense than its Young's modulus. Each manifest reports the channels'
-swing next to the published 3-9 kPa. A fitted material.json replaces it."""
+the barometric estimation paper's data-collection regime (0-8 N) on the built-in curved
+sensors: at 10 MPa a 3 mm sphere reaches 8 N at about its own radius, 3.1-3.2 mm along
+the inward normal (measured at six points of sphere8 up to 45 deg from its top: 6.9-7.4 N
+at 3 mm, 12.8-13.8 N at 4 mm), as Hertz's law gives for a 3 mm sphere pressed 3 mm into
+a Shore-20A-class silicone (E about 0.5 MPa, nearly incompressible: 8.0 N). At 3 MPa it
+took 5.8 mm, the ball sunk to twice its radius, which no gantry regime does. A bonded
+silicone layer is stiffer in the hydroelastic sense than its Young's modulus. Each
+manifest reports the channels' swing next to the published 3-9 kPa. A fitted
+material.json replaces it."""

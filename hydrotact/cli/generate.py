@@ -40,7 +40,7 @@ def add_parser(subparsers):
     parser.add_argument(
         "--modulus", type=number, metavar="E",
         help=f"hydroelastic modulus in Pa, elastic, without --material (default {DEFAULT_DATASET_MODULUS:.0e}: "
-        "a 3 mm sphere reaches the paper's 8 N within half the skin's thickness on the curved sensors)".replace("e+0", "e"))
+        "a 3 mm sphere reaches the paper's 8 N at about its own radius on the curved sensors)".replace("e+0", "e"))
     parser.add_argument("--randomise-material", action="store_true", help="draw the material from MATERIAL.json's covariance (domain randomisation; the draw is in the manifest)")
     parser.add_argument("--events", type=int, default=default("events"), metavar="N", help=f"contact events (default {default('events')}, the paper's)")
     parser.add_argument("--seed", type=int, default=default("seed"), metavar="K", help=f"seed of every draw (default {default('seed')})")

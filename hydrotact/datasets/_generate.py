@@ -172,7 +172,7 @@ def generate_dataset(sensor, output, *, material=None, modulus=None, config: Dat
     - `sensor`: a :class:`hydrotact.sensors.SensorSpec`, a built-in name or a spec file.
     - `material`: a material document (dict) or its JSON file (drawn from its
       covariance with `config.randomise_material`); without it an elastic material of
-      `modulus` Pa (default :data:`hydrotact._defaults.DEFAULT_DATASET_MODULUS`, 3 MPa).
+      `modulus` Pa (default :data:`hydrotact._defaults.DEFAULT_DATASET_MODULUS`, 10 MPa).
     - `config`: the regime (:class:`DatasetConfig`; the paper's by default).
     - `ray_address`: None to run in this process on every local JAX device; "auto" or
       an address to send the pose batches to a Ray cluster as tasks.
