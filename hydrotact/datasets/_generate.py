@@ -23,7 +23,7 @@ from .._files import digest
 from ._config import PHASES, DatasetConfig
 from ._store import finish_state, prepare_folder, read_manifest, start_state, write_manifest, write_shards
 
-GENERATOR = f"hydrotact {__version__} datasets/3"
+GENERATOR = f"hydrotact {__version__} datasets/4"
 """Bumped whenever the same seed and configuration give other rows (3: presses stop on
 the force along their approach, not the contact normal force)."""
 

@@ -5,7 +5,8 @@ Each event approaches its skin point along its drawn direction at its drawn spee
 one sample per 1/rate, no deeper than its own limit (:attr:`EventPlan.max_depths`).
 The approaches of all events march together in rounds (one batch of unit responses per
 round), each event taking as many samples as its force so far predicts it still needs
-(at most `ROUND_SAMPLES`): after each round an event whose elastic force along its
+(at most `ROUND_SAMPLES`; more where the round's last slice of poses has room, which
+the engine computes whole anyway): after each round an event whose elastic force along its
 approach E(0) F(s)·d has reached its target stops, and its hold depth is interpolated
 linearly between its last two samples (the approach samples find the depth; there is no
 separate search). The holds (one pose each) are computed last. The retract retraces
@@ -27,6 +28,7 @@ import numpy as np
 
 from .._files import atomic_path
 from ..sim import UnitResponse, calc_samples
+from ._compute import CHUNK
 from ._config import PHASES, DatasetConfig
 from ._events import EventPlan
 
@@ -124,6 +126,24 @@ class _Rounds:
         return np.concatenate(self.rows), {name: np.concatenate([part[name] for part in self.parts]) for name in names}
 
 
+def _fill_slices(lengths: np.ndarray, room: np.ndarray) -> np.ndarray:
+    """The round's samples per event (`lengths`), each event given more samples, in turn
+    and no more than its `room` (samples left to its depth limit), until the round fills
+    its last slice of CHUNK poses: the engine computes a whole slice anyway (padded with
+    copies of a pose), so the extra samples are free, and at the march's tail, where a
+    few deep presses creep towards their targets one or two samples a round, they save
+    whole rounds of slices on the largest buffers (measured in benchmarks/RESULTS.md)."""
+    extra = np.zeros_like(lengths)
+    slack = -int(lengths.sum()) % CHUNK
+    while slack > 0:
+        open_ = np.flatnonzero(lengths + extra < room)[:slack]
+        if open_.size == 0:
+            break
+        extra[open_] += 1
+        slack -= open_.size
+    return lengths + extra
+
+
 def _samples_to_go(forces: list, target: float) -> int:
     """Approach samples an event still needs, predicted from its last two: with both
     touching and rising, √F is extrapolated linearly in depth to the target, plus one
@@ -158,8 +178,8 @@ def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float
         active = np.flatnonzero(~done)
         wanted = np.array([_samples_to_go(forces[e], plan.target_forces[e]) for e in active.tolist()], dtype=np.int64)
         starts = taken[active]
-        stops = np.minimum(starts + wanted, limits[active])
-        lengths = stops - starts
+        lengths = _fill_slices(np.minimum(starts + wanted, limits[active]) - starts, limits[active] - starts)
+        stops = starts + lengths
         events = np.repeat(active, lengths)
         k = np.concatenate([np.arange(a, b) for a, b in zip(starts, stops)])
         depths = -config.clearance + k * steps[events]
@@ -206,11 +226,16 @@ def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float
             hold_depths[event] = -config.clearance + used * step
         approach.append(np.asarray(index_of[event][:used], dtype=np.int64))
         depths.append(-config.clearance + np.arange(used) * step)
-    holds, _ = rounds.add(np.vstack([_pose_rows(plan, np.arange(count), hold_depths), FAR_ROW[None]]))
+    # Shallowest first, as in the march: in event order nearly every slice held a deep
+    # hold and climbed to the largest buffers.
+    order = np.argsort(hold_depths, kind="stable")
+    index, _ = rounds.add(np.vstack([_pose_rows(plan, order, hold_depths[order]), FAR_ROW[None]]))
+    hold = np.empty(count, dtype=np.int64)
+    hold[order] = index[:count]
     rows, table = rounds.table()
     return Presses(
-        rows=rows, table=table, approach=approach, depths=depths, hold=holds[:count], hold_depths=hold_depths, reached=reached,
-        hold_forces=_axial_forces(table["force_S"][holds[:count]], plan.directions, modulus), far=int(holds[count]), num_rounds=rounds.rounds,
+        rows=rows, table=table, approach=approach, depths=depths, hold=hold, hold_depths=hold_depths, reached=reached,
+        hold_forces=_axial_forces(table["force_S"][hold], plan.directions, modulus), far=int(index[count]), num_rounds=rounds.rounds,
     )
 
 
