@@ -29,7 +29,7 @@ def plot_coverage(dataset, path) -> None:
     top.set_aspect("equal")
     top.set_xlabel("x (mm)")
     top.set_ylabel("y (mm)")
-    top.set_title(f"centre of pressure at each hold ({len(rows)} events), seen from above")
+    top.set_title(f"centre of pressure at each hold\n({len(rows)} events), seen from above")
     if angles:
         side = axes[1]
         side.scatter(np.degrees(columns["phi"][rows]), np.degrees(columns["theta"][rows]), s=6, color="C0", label="events")
