@@ -252,13 +252,8 @@ def test_residual_stress_carries_from_event_to_event():
     assert presses.reached.all()
     np.testing.assert_allclose(presses.hold_forces, plan.target_forces, rtol=0.05)  # the hold depth reaches the target force
     # The march computes few poses past each target (the √F prediction): per event its
-    # approach, the first sample at the target and at most one more, then the holds and
-    # the far pose; beyond those only what fills a round's last slice, which the engine
-    # computes whole anyway.
-    from hydrotact.datasets._compute import CHUNK
-
-    march = len(presses.rows) - (plan.num_events + 1)
-    assert march <= sum(len(a) + 2 for a in presses.approach) + (CHUNK - 1) * (presses.num_rounds - 1)
+    # approach, the first sample at the target, at most one more, and the hold; and the far pose.
+    assert len(presses.rows) <= sum(len(a) + 3 for a in presses.approach) + 1
     timeline = lay_out_timeline(plan, presses, config)
     columns = run_session(model, material, presses, timeline, config, None, None)
     unit_fz = presses.table["force_S"][timeline.pose, 2]
@@ -294,21 +289,6 @@ def test_presses_at_the_board_stop_at_their_target_along_the_approach():
     whole = modulus * np.linalg.norm(presses.table["force_S"][presses.hold], axis=1)
     assert np.all(whole < 1.2 * plan.target_forces), (whole, plan.target_forces)
     assert np.all(presses.hold_depths < 3e-3), presses.hold_depths
-
-
-def test_a_round_fills_its_last_slice_in_turn_within_each_events_room():
-    """The march's rounds fill the engine's last slice with further samples of the
-    events still approaching (free: the slice is computed whole anyway), one per event
-    in turn, none past an event's depth limit."""
-    from hydrotact.datasets._compute import CHUNK
-    from hydrotact.datasets._session import _fill_slices
-
-    filled = _fill_slices(np.array([1, 2, 1, 3]), np.array([1, 40, 5, 100]))
-    np.testing.assert_array_equal(filled, [1, 29, 5, 29])  # 57 more: 0 (no room), 27, 4 (its room), 26
-    assert filled.sum() == CHUNK
-    np.testing.assert_array_equal(_fill_slices(np.array([2, 3]), np.array([2, 4])), [2, 4])  # no room left: short of a slice
-    full = np.ones(2 * CHUNK, dtype=np.int64)
-    np.testing.assert_array_equal(_fill_slices(full, np.full(2 * CHUNK, 9)), full)  # already whole slices: unchanged
 
 
 # --- determinism, resumption, scale-out ---------------------------------------------

@@ -5,8 +5,7 @@ Each event approaches its skin point along its drawn direction at its drawn spee
 one sample per 1/rate, no deeper than its own limit (:attr:`EventPlan.max_depths`).
 The approaches of all events march together in rounds (one batch of unit responses per
 round), each event taking as many samples as its force so far predicts it still needs
-(at most `ROUND_SAMPLES`; more where the round's last slice of poses has room, which
-the engine computes whole anyway): after each round an event whose elastic force along its
+(at most `ROUND_SAMPLES`): after each round an event whose elastic force along its
 approach E(0) F(s)·d has reached its target stops, and its hold depth is interpolated
 linearly between its last two samples (the approach samples find the depth; there is no
 separate search). The holds (one pose each) are computed last. The retract retraces
@@ -28,7 +27,6 @@ import numpy as np
 
 from .._files import atomic_path
 from ..sim import UnitResponse, calc_samples
-from ._compute import CHUNK
 from ._config import PHASES, DatasetConfig
 from ._events import EventPlan
 
@@ -126,24 +124,6 @@ class _Rounds:
         return np.concatenate(self.rows), {name: np.concatenate([part[name] for part in self.parts]) for name in names}
 
 
-def _fill_slices(lengths: np.ndarray, room: np.ndarray) -> np.ndarray:
-    """The round's samples per event (`lengths`), each event given more samples, in turn
-    and no more than its `room` (samples left to its depth limit), until the round fills
-    its last slice of CHUNK poses: the engine computes a whole slice anyway (padded with
-    copies of a pose), so the extra samples are free, and at the march's tail, where a
-    few deep presses creep towards their targets one or two samples a round, they save
-    whole rounds of slices on the largest buffers (measured in benchmarks/RESULTS.md)."""
-    extra = np.zeros_like(lengths)
-    slack = -int(lengths.sum()) % CHUNK
-    while slack > 0:
-        open_ = np.flatnonzero(lengths + extra < room)[:slack]
-        if open_.size == 0:
-            break
-        extra[open_] += 1
-        slack -= open_.size
-    return lengths + extra
-
-
 def _samples_to_go(forces: list, target: float) -> int:
     """Approach samples an event still needs, predicted from its last two: with both
     touching and rising, √F is extrapolated linearly in depth to the target, plus one
@@ -178,8 +158,8 @@ def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float
         active = np.flatnonzero(~done)
         wanted = np.array([_samples_to_go(forces[e], plan.target_forces[e]) for e in active.tolist()], dtype=np.int64)
         starts = taken[active]
-        lengths = _fill_slices(np.minimum(starts + wanted, limits[active]) - starts, limits[active] - starts)
-        stops = starts + lengths
+        stops = np.minimum(starts + wanted, limits[active])
+        lengths = stops - starts
         events = np.repeat(active, lengths)
         k = np.concatenate([np.arange(a, b) for a, b in zip(starts, stops)])
         depths = -config.clearance + k * steps[events]
