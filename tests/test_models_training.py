@@ -301,9 +301,10 @@ def test_the_c_export_compiles_and_matches_jax(tiny, trained, tmp_path, variant)
 
 
 def test_fine_tuning_a_pretrained_model_beats_training_from_scratch_on_a_few_recordings(trained, tmp_path):
-    """A stand-in for a real sensor: sphere8 with another, viscoelastic material, its
-    own channel gains and offsets and barometer positions jittered; a few of its
-    recordings, written and read back as logs. Fine-tuning the model pretrained on the
+    """A stand-in for a real sensor: sphere8 with another, much softer viscoelastic
+    material (E(0) 2.2 MPa against the pretraining's 10 MPa), its own channel gains and
+    offsets and barometer positions jittered; a few of its recordings, written and read
+    back as logs. Fine-tuning the model pretrained on the
     synthetic dataset reaches a lower validation loss than the same model trained from
     scratch on the same recordings for the same epochs."""
     import dataclasses
@@ -317,14 +318,19 @@ def test_fine_tuning_a_pretrained_model_beats_training_from_scratch_on_a_few_rec
     other = [*TINY, "--events", "10", "--seed", "9", "--gain-spread", "0.1", "--offset-spread", "300", "--position-jitter", "0.3e-3", "--material", str(material)]
     assert main(["generate", *other, "-o", str(folder)]) == 0
     real = load_dataset(folder)
-    logs = []
-    for k, block in enumerate(real.blocks("train") + real.blocks("test")):
-        metadata = {"format": "hydrotact.barometer_log", "version": 1, "sensor": "sphere8", "source": "simulated", "pressure": "absolute", "channels": list(real.channels)}
-        columns = {name: block[name] for name in ("time", *real.channels, "fx", "fy", "fz", "fn", "theta", "phi", "contact")}
-        logs.append(read_log(write_log(tmp_path / f"press-{k}.parquet", BarometerLog(metadata, columns))).columns)
-    train_logs, validation_logs = logs[:-1], logs[-1:]
+    logs = {}
+    for split in ("train", "test"):
+        logs[split] = []
+        for k, block in enumerate(real.blocks(split)):
+            metadata = {"format": "hydrotact.barometer_log", "version": 1, "sensor": "sphere8", "source": "simulated", "pressure": "absolute", "channels": list(real.channels)}
+            columns = {name: block[name] for name in ("time", *real.channels, "fx", "fy", "fz", "fn", "theta", "phi", "contact")}
+            logs[split].append(read_log(write_log(tmp_path / f"{split}-{k}.parquet", BarometerLog(metadata, columns))).columns)
+    # Validated on every held-out recording (three, about 2.5 s): one recording of a
+    # second holds a sequence or two, and its loss says more about the sequence than the model.
+    assert len(logs["test"]) >= 3
     config = TrainConfig(**(QUICK | {"max_epochs": 6, "learning_rate": 3e-3}))
-    tuned = fine_tune_estimator(trained, train_logs, validation_logs, config)
-    scratch = fine_tune_estimator(dataclasses.replace(trained, params=init_estimator(trained.spec, jax.random.PRNGKey(1))), train_logs, validation_logs, config)
+    tuned = fine_tune_estimator(trained, logs["train"], logs["test"], config)
     best = lambda run: min(entry["validation_loss"] for entry in run.history)
-    assert best(tuned) < best(scratch), (best(tuned), best(scratch))
+    for seed in (1, 2):  # against more than one initialisation: not a lucky or unlucky draw
+        scratch = fine_tune_estimator(dataclasses.replace(trained, params=init_estimator(trained.spec, jax.random.PRNGKey(seed))), logs["train"], logs["test"], config)
+        assert best(tuned) < best(scratch), (seed, best(tuned), best(scratch))
