@@ -25,7 +25,8 @@ from ._store import finish_state, prepare_folder, read_manifest, start_state, wr
 
 GENERATOR = f"hydrotact {__version__} datasets/4"
 """Bumped whenever the same seed and configuration give other rows (3: presses stop on
-the force along their approach, not the contact normal force)."""
+the force along their approach, not the contact normal force; 4: the default modulus
+10 MPa, and the holds computed shallowest first)."""
 
 STREAMS = ("events", "material", "sensor", "noise", "split")
 """The independent random streams one seed spawns (numpy SeedSequence), in order."""
