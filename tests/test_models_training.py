@@ -318,13 +318,10 @@ def test_fine_tuning_a_pretrained_model_beats_training_from_scratch_on_a_few_rec
     other = [*TINY, "--events", "10", "--seed", "9", "--gain-spread", "0.1", "--offset-spread", "300", "--position-jitter", "0.3e-3", "--material", str(material)]
     assert main(["generate", *other, "-o", str(folder)]) == 0
     real = load_dataset(folder)
-    logs = {}
-    for split in ("train", "test"):
-        logs[split] = []
-        for k, block in enumerate(real.blocks(split)):
-            metadata = {"format": "hydrotact.barometer_log", "version": 1, "sensor": "sphere8", "source": "simulated", "pressure": "absolute", "channels": list(real.channels)}
-            columns = {name: block[name] for name in ("time", *real.channels, "fx", "fy", "fz", "fn", "theta", "phi", "contact")}
-            logs[split].append(read_log(write_log(tmp_path / f"{split}-{k}.parquet", BarometerLog(metadata, columns))).columns)
+    metadata = {"format": "hydrotact.barometer_log", "version": 1, "sensor": "sphere8", "source": "simulated", "pressure": "absolute", "channels": list(real.channels)}
+    names = ("time", *real.channels, "fx", "fy", "fz", "fn", "theta", "phi", "contact")
+    logs = {split: [read_log(write_log(tmp_path / f"{split}-{k}.parquet", BarometerLog(metadata, {name: block[name] for name in names}))).columns
+                    for k, block in enumerate(real.blocks(split))] for split in ("train", "test")}
     # Validated on every held-out recording (three, about 2.5 s): one recording of a
     # second holds a sequence or two, and its loss says more about the sequence than the model.
     assert len(logs["test"]) >= 3
