@@ -30,6 +30,9 @@ demo: $(VENV)/.installed
 # file's output is printed whole when it ends, longest files first so the run ends
 # together. pytest exits 5 when it collected no tests: that is a failure here, like any
 # non-zero status, and any failing file fails the run (and is named at the end).
+# Each file's line gives the CPU time its processes used (the shell's `times`; a Ray
+# cluster's daemons are not its children and are not counted): beside another file,
+# wall time says little about a file's own cost.
 # All test processes share one persistent XLA compilation cache, made anew each run
 # (locked: its size is bounded): files, notebooks and experiments compile many of the
 # same programs.
@@ -43,8 +46,8 @@ test: $(VENV)/.installed-test
 	@rm -rf $(TEST_LOGS) && mkdir -p $(TEST_LOGS)
 	@export JAX_COMPILATION_CACHE_DIR=$(CURDIR)/$(TEST_LOGS)/xla-cache JAX_COMPILATION_CACHE_MAX_SIZE=4000000000; printf '%s\n' $(TEST_FILES) | xargs -P $(TEST_JOBS) -I FILE sh -c '\
 	    log=$(TEST_LOGS)/$$(basename FILE .py).log; echo "== FILE started"; \
-	    $(BIN)/python -m pytest --durations=8 FILE > $$log 2>&1; status=$$?; \
-	    echo "== FILE (exit $$status)"; cat $$log; \
+	    $(BIN)/python -m pytest --durations=8 FILE > $$log 2>&1; status=$$?; times > $$log.cpu; \
+	    echo "== FILE (exit $$status; CPU time of its processes, user and system: $$(tail -n 1 $$log.cpu))"; cat $$log; \
 	    [ $$status -eq 0 ] || touch $$log.failed; exit 0'
 	@failed=$$(ls $(TEST_LOGS) | sed -n "s/\.log\.failed$$//p"); \
 	if [ -n "$$failed" ]; then echo "make test: these test files failed (see above):" $$failed; exit 1; fi; \

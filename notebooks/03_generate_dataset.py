@@ -51,7 +51,8 @@ OUT.mkdir(parents=True, exist_ok=True)
 # Every number of the paper's regime is a field of `DatasetConfig`; our choices where
 # the paper is silent (a 3 mm sphere, tilts up to 30° from the skin normal, approach
 # speeds 4-20 mm/s, gaps 0.5-2 s) are documented there. The material: here a
-# viscoelastic silicone written as a material document, as `hydrotact fit` writes one.
+# viscoelastic silicone (E(0) 10 MPa, the generator's default) written as a material
+# document, as `hydrotact fit` writes one.
 
 # %%
 from hydrotact.data import make_material_document, write_material
@@ -60,7 +61,7 @@ from hydrotact.sensors import load_sensor
 
 material_path = write_material(
     OUT / "material.json",
-    make_material_document(6e5, [2.5e5, 1.5e5], [0.8, 12.0], covariance=np.diag([0.01, 0.04, 0.04, 0.02, 0.02]), name="silicone (example)"),
+    make_material_document(6e6, [2.5e6, 1.5e6], [0.8, 12.0], covariance=np.diag([0.01, 0.04, 0.04, 0.02, 0.02]), name="silicone (example)"),
 )
 if SMOKE:
     config = DatasetConfig(events=4, seed=0, num_rays=16, hold_range=(0.3, 0.6), gap_range=(0.2, 0.4), speed_range=(0.01, 0.02), force_range=(0.2, 2.0))
