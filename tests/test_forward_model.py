@@ -147,6 +147,47 @@ def test_jit_vmap_over_trajectories_and_no_recompile(pad_model):
     assert np.min(one.force_S[:, 2]) < -0.1
 
 
+def test_simulate_compiles_once_for_trajectories_of_many_lengths(pad_model):
+    """simulate pads its blocks of distinct poses to powers of two and its material and
+    barometer pass to a few lengths: after one trajectory, shorter ones of other
+    lengths compile nothing (a loop over presses of many lengths used to compile one
+    program per length, until XLA ran out of memory), and each gives the samples of
+    the same pass at its own length, barometer noise included."""
+    from hydrotact.sim import compute_trajectory_responses
+    from hydrotact.sim._host import _calc_samples, calc_block_size, calc_padded_length
+
+    assert [calc_block_size(n) for n in (1, 16, 17, 100, 128, 5000)] == [16, 16, 32, 128, 128, 128]
+    assert [calc_padded_length(n) for n in (1, 64, 65, 80, 81, 127, 129, 1000)] == [64, 64, 80, 80, 96, 128, 160, 1024]
+    probe = make_cylinder_probe(2e-3)
+    material = _material()
+    signal = make_barometer_signal(load_sensor("pad5x5").part, pad_model.num_taxels, noise_rms=3.0)
+    full, key = _press(), jax.random.PRNGKey(5)
+    simulate(pad_model, material, probe, full, barometer=signal, key=key, cache=False)
+    parts = [jax.tree_util.tree_map(lambda a, n=n: np.asarray(a)[:n], full) for n in (9, 10, 11)]
+    compilations = []
+
+    def listener(event, duration, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compilations.append(duration)
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        padded = [simulate(pad_model, material, probe, part, barometer=signal, key=key, cache=False) for part in parts]
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    # Per length only two small ops of the pose rows (Trajectory.rows: a conversion and
+    # a concatenation, hundredths of a second); unpadded, the contact and ray kernels
+    # and the sample pass compiled again at each length as well.
+    assert len(compilations) <= 2 * len(parts), compilations
+    for part, samples in zip(parts, padded):
+        unit = jax.tree_util.tree_map(jnp.asarray, compute_trajectory_responses(pad_model, probe, part, cache=False))
+        exact = _calc_samples(pad_model, material, part.times, unit, signal, key)  # at the trajectory's own length
+        assert samples.readings.shape == (part.num_samples, pad_model.num_taxels) and samples.modulus.shape == ()
+        for name in ("readings", "taxel_pressures", "force_S", "theta", "contact"):
+            np.testing.assert_array_equal(getattr(samples, name), np.asarray(getattr(exact, name)), err_msg=name)
+    assert np.ptp(padded[-1].readings[:, 12]) > 100.0  # the press reads, with noise
+
+
 def _reference(name):
     with np.load(DATA / "regression_logs.npz") as saved:
         columns = {key.split("/", 1)[1]: saved[key] for key in saved.files if key.startswith(f"{name}/") and not key.endswith("/metadata")}

@@ -26,7 +26,7 @@ import numpy as np
 from .. import __version__
 from .._buffers import run_growing
 from .._files import atomic_path, cache_dir, digest
-from ..contact import make_pose, map_over_poses
+from ..contact import CPU_POSE_GROUP, make_pose, map_over_poses
 from ..visco import BarometerSignal, Prony
 from ._model import SensorModel
 from ._simulate import Samples, SimCapacity, UnitResponse, calc_samples, calc_unit_response
@@ -36,6 +36,26 @@ from ._trajectory import Trajectory, find_distinct_poses
 # most one block: seconds of work on a laptop CPU).
 BLOCK = 128
 _CACHE_VERSION = "unit-responses-2"
+
+
+def calc_block_size(count: int) -> int:
+    """Poses per block for `count` distinct poses: BLOCK, or for fewer poses the next
+    power of two from CPU_POSE_GROUP (the block padded with its last pose). A shape
+    compiles the contact and ray kernels anew (10-20 s on a laptop CPU), so blocks
+    sized to each trajectory's pose count made a loop over presses compile once per
+    press (host)."""
+    return min(BLOCK, max(CPU_POSE_GROUP, 1 << (max(count, 1) - 1).bit_length()))
+
+
+def calc_padded_length(count: int) -> int:
+    """The sample count `simulate` runs the material and barometer pass at for
+    `count` samples: 2**k times 1, 1.25, 1.5 or 1.75, at least 64 (at most a quarter
+    more samples, four shapes per doubling; host). The pass is causal, so the padded
+    tail changes no earlier sample."""
+    if count <= 64:
+        return 64
+    octave = 1 << (count.bit_length() - 1)
+    return next(octave * step // 4 for step in (4, 5, 6, 7, 8) if octave * step // 4 >= count)
 
 
 @eqx.filter_jit
@@ -146,7 +166,7 @@ def compute_pose_responses(model: SensorModel, probe, pose_rows, *, progress: bo
             bar.set_postfix_str("", refresh=False)
             bar.update(min(used, count - bar.n))  # the last block's padding is no pose
 
-        size = min(BLOCK, count)  # every block one shape (the last padded): one compilation
+        size = calc_block_size(count)  # every block one shape (the last padded): one compilation
         for start in range(done, count, BLOCK):
             stop = min(count, start + BLOCK)
             index = np.minimum(np.arange(start, start + size), count - 1)
@@ -201,6 +221,20 @@ def simulate(
     **Returns:** Samples (NumPy arrays).
     """
     unit = compute_trajectory_responses(model, probe, trajectory, progress=progress, checkpoint=checkpoint, cache=cache, capacity=capacity)
+    times = np.asarray(trajectory.times)
+    count = len(times)
+    # One compilation per padded length, not per trajectory length (a loop over presses
+    # of many lengths compiled one program each, until XLA ran out of memory). The pass
+    # is causal and the barometer noise of the first `count` rows of a longer draw is
+    # the draw of `count` rows (partitionable threefry, JAX's default), so the samples
+    # are those of the unpadded trajectory.
+    extra = calc_padded_length(count) - count if key is None or jax.config.jax_threefry_partitionable else 0
+    if extra:
+        step = times[-1] - times[-2] if count > 1 else 1.0
+        times = np.concatenate([times, times[-1] + step * np.arange(1, extra + 1, dtype=times.dtype)])
+        unit = jax.tree_util.tree_map(lambda a: np.concatenate([a, np.repeat(a[-1:], extra, axis=0)]), unit)
     unit = jax.tree_util.tree_map(jnp.asarray, unit)
-    samples = _calc_samples(model, material, jnp.asarray(trajectory.times), unit, barometer, key)
-    return jax.tree_util.tree_map(np.asarray, samples)
+    samples = _calc_samples(model, material, jnp.asarray(times), unit, barometer, key)
+    modulus = samples.modulus  # the only field without a sample axis
+    samples = jax.tree_util.tree_map(lambda a: np.asarray(a)[:count], dataclasses.replace(samples, modulus=None))
+    return dataclasses.replace(samples, modulus=np.asarray(modulus))
