@@ -1,8 +1,11 @@
-"""Shared test helpers: finite differences, closed surfaces, running the CLI."""
+"""Shared test helpers: finite differences, closed surfaces, running the CLI, counting
+XLA compilations."""
 
+import contextlib
 import subprocess
 import sys
 
+import jax
 import numpy as np
 import trimesh
 
@@ -62,3 +65,20 @@ def locate(vertices, tets, points, tolerance=1e-9):
     assert inside.any(axis=1).all(), "a point lies outside the mesh"
     index = np.argmax(inside, axis=1)
     return index, bary[np.arange(len(points)), index]
+
+
+@contextlib.contextmanager
+def count_compilations():
+    """Collects one entry (its duration, s) per XLA backend compilation inside the
+    block (a program found in the persistent cache is not compiled, not counted)."""
+    compilations = []
+
+    def listener(event, duration, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compilations.append(duration)
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        yield compilations
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)

@@ -11,6 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import count_compilations
 
 from hydrotact.contact import make_cylinder_probe, make_sphere_probe
 from hydrotact.data import make_material_document, material_prony
@@ -164,17 +165,8 @@ def test_simulate_compiles_once_for_trajectories_of_many_lengths(pad_model):
     full, key = _press(), jax.random.PRNGKey(5)
     simulate(pad_model, material, probe, full, barometer=signal, key=key, cache=False)
     parts = [jax.tree_util.tree_map(lambda a, n=n: np.asarray(a)[:n], full) for n in (9, 10, 11)]
-    compilations = []
-
-    def listener(event, duration, **kwargs):
-        if event == "/jax/core/compile/backend_compile_duration":
-            compilations.append(duration)
-
-    jax.monitoring.register_event_duration_secs_listener(listener)
-    try:
+    with count_compilations() as compilations:
         padded = [simulate(pad_model, material, probe, part, barometer=signal, key=key, cache=False) for part in parts]
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listener)
     # Per length only two small ops of the pose rows (Trajectory.rows: a conversion and
     # a concatenation, hundredths of a second); unpadded, the contact and ray kernels
     # and the sample pass compiled again at each length as well.

@@ -10,7 +10,6 @@ A new log of the same shapes reuses the compiled solve (checked by counting XLA
 compilations).
 """
 
-import contextlib
 import json
 
 import equinox as eqx
@@ -20,6 +19,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 import pytest
+from helpers import count_compilations
 from sysid_synthetic import FullLogMaker
 
 from hydrotact import HydrotactError
@@ -57,22 +57,6 @@ def _material_estimates(result):
 
 def _material_truth(truth):
     return [truth["long_term_modulus"], *truth["moduli"], *truth["taus"]]
-
-
-@contextlib.contextmanager
-def count_compilations():
-    """Collects one entry per XLA backend compilation inside the block."""
-    compilations = []
-
-    def listener(event, duration, **kwargs):
-        if event == "/jax/core/compile/backend_compile_duration":
-            compilations.append(duration)
-
-    jax.monitoring.register_event_duration_secs_listener(listener)
-    try:
-        yield compilations
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listener)
 
 
 # --- shared logs and fits -------------------------------------------------------------
