@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import __version__
-from .._buffers import run_growing
+from .._buffers import MAX_BUFFER, run_growing
 from .._files import atomic_path, cache_dir, digest
 from ..contact import CPU_POSE_GROUP, make_pose, map_over_poses
 from ..visco import BarometerSignal, Prony
@@ -58,6 +58,20 @@ def calc_padded_length(count: int) -> int:
     return next(octave * step // 4 for step in (4, 5, 6, 7, 8) if octave * step // 4 >= count)
 
 
+def calc_ladder_rung(capacity: SimCapacity) -> SimCapacity:
+    """The buffers a chunk is computed with: the lowest rung of the ladder
+    SimCapacity() times 2**k (every buffer scaled alike, k of either sign) that holds
+    `capacity` (host; no buffer past MAX_BUFFER). Growing each buffer on its own made
+    a new combination of sizes, and so a compilation of the contact and ray kernels,
+    for nearly every trajectory of a loop over presses (25 compilations of about 11 s
+    in the first 512 poses of benchmarks/generate.py's loop baseline); on the ladder
+    a few rungs serve them all, as the dataset engine's ladder does."""
+    base = SimCapacity().sizes
+    k = max(int(np.ceil(np.log2(size / b))) for size, b in zip(capacity.sizes, base))
+    rung = [b << k if k >= 0 else -(-b // (1 << -k)) for b in base]
+    return SimCapacity(*(max(size, min(step, MAX_BUFFER)) for size, step in zip(capacity.sizes, rung)))
+
+
 @eqx.filter_jit
 def _chunk_response(model, probe, X_SR, capacity):
     return map_over_poses(lambda X: calc_unit_response(model, probe, X, capacity), X_SR)
@@ -78,7 +92,7 @@ def compute_unit_responses(model: SensorModel, probe, X_SR, capacity: SimCapacit
     for start in range(0, count, chunk):
         index = np.minimum(np.arange(start, start + chunk), count - 1)  # pad the last chunk
         poses = jax.tree_util.tree_map(lambda a, index=index: a[index], X_SR)
-        unit, capacity = run_growing(lambda size, poses=poses: _chunk_response(model, probe, poses, size), capacity)
+        unit, capacity = run_growing(lambda size, poses=poses: _chunk_response(model, probe, poses, calc_ladder_rung(size)), capacity)
         used = min(chunk, count - start)
         pieces.append(jax.tree_util.tree_map(lambda a, used=used: np.asarray(a)[:used], unit))
         if on_chunk is not None:
