@@ -151,9 +151,11 @@ def test_jit_vmap_over_trajectories_and_no_recompile(pad_model):
 def test_simulate_compiles_once_for_trajectories_of_many_lengths(pad_model):
     """simulate pads its blocks of distinct poses to powers of two and its material and
     barometer pass to a few lengths: after one trajectory, shorter ones of other
-    lengths compile nothing (a loop over presses of many lengths used to compile one
-    program per length, until XLA ran out of memory), and each gives the samples of
-    the same pass at its own length, barometer noise included."""
+    lengths compile none of the contact, ray or sample kernels (a loop over presses of
+    many lengths used to compile them per length, until XLA ran out of memory; these
+    lengths' programs are compiled nowhere else in the suite, so the shared persistent
+    cache cannot hide one), and each gives the samples of the same pass at its own
+    length, barometer noise included."""
     from hydrotact.sim import compute_trajectory_responses
     from hydrotact.sim._host import _calc_samples, calc_block_size, calc_padded_length
 
