@@ -3,8 +3,10 @@ unit responses, and resumable runs.
 
 :func:`simulate` returns what :func:`hydrotact.sim.calc_simulation` returns, for
 trajectories of any length: the unit responses of the trajectory's *distinct* poses
-(a probe held still repeats its pose) are computed in jitted chunks, every buffer that
-overflows is grown and its chunk recomputed, and then the pure
+(a probe held still repeats its pose) are computed in jitted chunks of a few fixed
+sizes, on a ladder of buffer sizes (:func:`calc_ladder_rung`: every buffer grown by the
+rule of :mod:`hydrotact._buffers`, then scaled up together to the next rung) and
+recomputed while any overflows, and then the pure
 :func:`hydrotact.sim.calc_samples` applies the material and the barometer.
 
 Unit responses are the expensive part, and the same ones serve a simulation and every
@@ -63,8 +65,9 @@ def calc_ladder_rung(capacity: SimCapacity) -> SimCapacity:
     SimCapacity() times 2**k (every buffer scaled alike, k of either sign) that holds
     `capacity` (host; no buffer past MAX_BUFFER). Growing each buffer on its own made
     a new combination of sizes, and so a compilation of the contact and ray kernels,
-    for nearly every trajectory of a loop over presses (25 compilations of about 11 s
-    in the first 512 poses of benchmarks/generate.py's loop baseline); on the ladder
+    for nearly every trajectory of a loop over presses (30 compilations of about 11 s,
+    and counting, in the first 512 poses of benchmarks/generate.py's loop baseline, 11
+    on the ladder); on the ladder
     a few rungs serve them all, as the dataset engine's ladder does."""
     base = SimCapacity().sizes
     k = max(int(np.ceil(np.log2(size / b))) for size, b in zip(capacity.sizes, base))
