@@ -42,6 +42,7 @@ from ._lumped import (
     calc_elastic,
     calc_press_jacobian,
     press_residual_fn,
+    scan_site_onsets,
     solve_baselines,
     solve_linear,
 )
@@ -223,6 +224,44 @@ def _press_outputs(layout, x, args):
     return (residuals, baselines, amplitudes), jacobian, sensitivity
 
 
+ONSET_RESCANS = 2  # at most this many site-onset scans (and re-solves) after a start's solve
+# A rescan's minimum replaces the solver's only when the model's own χ² falls by more
+# than χ²(1)'s 0.1 % point: where the lumped law only approximates a curved skin
+# (test_press_fit's stand-in), a site's onset can move 100-300 µm along the valley for
+# an own χ² lower by 3.7 (and the solver's by 33) over 6943 residuals, which says
+# nothing; the onsets then stay near their estimates from the travel. On a log the
+# model fits exactly, the trap a rescan is for costs 44 (test_lumped).
+ONSET_RESCAN_MIN_GAIN = 10.83
+
+
+def _own_chi_square(outputs) -> float:
+    return float(sum(jnp.sum(r**2) for r in outputs[0][0]))
+
+
+def solve_press_scanned(layout: PressLayout, solver, max_steps: int, x0, args):
+    """The solve from x0, then while a scan of each site's common onset shift
+    (:func:`scan_site_onsets`) lowers the solver's χ², a re-solve from the scan's
+    best (at most ONSET_RESCANS times), kept when it lowers the model's own χ² by
+    more than ONSET_RESCAN_MIN_GAIN: a site's onsets and its law nearly trade, and the
+    solver alone can end with every press at a site early by the same amount.
+    Returns (the solution, its outputs (:func:`_press_outputs`), its own χ²)."""
+    solution = _solve_press(layout, solver, max_steps, x0, args)
+    outputs = _press_outputs(layout, solution.value, args)
+    chi_square = _own_chi_square(outputs)
+    for _ in range(ONSET_RESCANS):
+        current = float(jnp.sum(press_residual_fn(layout)(solution.value, args) ** 2))
+        x, cost = scan_site_onsets(layout, solution.value, args)
+        if not cost < current * (1.0 - 1e-6):
+            break
+        rescanned = _solve_press(layout, solver, max_steps, x, args)
+        rescanned_outputs = _press_outputs(layout, rescanned.value, args)
+        rescanned_chi_square = _own_chi_square(rescanned_outputs)
+        if not rescanned_chi_square < chi_square - ONSET_RESCAN_MIN_GAIN:
+            break
+        solution, outputs, chi_square = rescanned, rescanned_outputs, rescanned_chi_square
+    return solution, outputs, chi_square
+
+
 def _fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps, starts, num_used, num_linear):
     """Fit `num_terms` terms from the shape starts in turn (starts "auto": until one
     ends at a reduced χ², the model's own, below RESTART_REDUCED_CHI2; N: the first
@@ -237,9 +276,7 @@ def _fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps,
     candidates = SHAPE_STARTS if starts == "auto" else SHAPE_STARTS[:starts]
     for start in candidates if num_terms else candidates[:1]:  # no terms, no shape to start
         tried += 1
-        solution = _solve_press(layout, solver, max_steps, jnp.asarray(_initial_x(layout, logs, lag, start)), args)
-        outputs = _press_outputs(layout, solution.value, args)
-        chi_square = float(sum(jnp.sum(r**2) for r in outputs[0][0]))
+        solution, outputs, chi_square = solve_press_scanned(layout, solver, max_steps, jnp.asarray(_initial_x(layout, logs, lag, start)), args)
         if best is None or chi_square < best[3][0]:
             solver_chi_square = float(jnp.sum(press_residual_fn(layout)(solution.value, args) ** 2))
             best = (layout, args, solution, (chi_square, solver_chi_square), outputs)
