@@ -18,7 +18,8 @@ the median no-contact readings of the two datasets' training splits.
 
 Outputs (in --output, default experiments/results/): `ablation_table1.json` (every
 run's metrics, the settings and the timings), `ablation_table1.md` (the table) and
-`ablation_table1.png` (force and angle RMSEs per row). Datasets and training runs are
+`ablation_table1.png` (force and angle RMSEs per row) and `ablation_table1_error_map_SENSOR.png`
+(the paper's Fig. 5: each row's localisation error over the skin). Datasets and training runs are
 kept under `ablation_table1.work/` and resume when the script is run again.
 
 Run: `.venv/bin/python experiments/ablation_table1.py [--events 2500] [--seeds 3] [--smoke]`.
@@ -41,10 +42,12 @@ from hydrotact.data import make_material_document, write_material  # noqa: E402
 from hydrotact.datasets import DatasetConfig, generate_dataset, load_dataset  # noqa: E402
 from hydrotact.models import (  # noqa: E402
     TrainConfig,
+    calc_error_map,
     calc_skin_radius,
     count_parameters,
     evaluate_estimator,
     make_estimator_spec,
+    save_estimator,
     train_estimator,
 )
 from hydrotact.sensors import load_sensor  # noqa: E402
@@ -109,12 +112,16 @@ def main() -> None:
                     t = time.perf_counter()
                     trained = train_estimator(dataset, sensor, config, folder=folder)
                     seconds = time.perf_counter() - t
+                    save_estimator(trained, folder, sensor_name)  # a model folder, as from hydrotact train (fine_tuning_curve.py starts from one)
                     result = evaluate_estimator(trained, dataset.blocks("test"), rate, radius)
+                    error_map = calc_error_map(result["location_errors"], sensor.theta_range, sensor.phi_range)
                     runs.append({
                         "sensor": sensor_name, "row": label, "architecture": architecture, "hidden": list(trained.spec.hidden), "binned": binned,
                         "seed": seed, "parameters": count_parameters(trained.spec), "epochs": len(trained.history), "best_epoch": trained.best_epoch,
                         "train_seconds": sum(e["seconds"] for e in trained.history), "wall_seconds": seconds,
                         "metrics": result["metrics"], "detection": {k: v["accuracy"] for k, v in result["detection"].items()},
+                        "error_map": {k: np.asarray(v).tolist() for k, v in error_map.items() if k in ("theta_edges", "phi_edges", "count")}
+                        | {"mean": [[None if np.isnan(x) else float(x) for x in row] for row in error_map["mean"]], "unit": error_map["unit"]},
                     })
                     print(f"{sensor_name} {label} {'binned' if binned else 'plain'} seed {seed}: {runs[-1]['parameters']} parameters, "
                           + ", ".join(f"{k} {v:.3g}" for k, v in result["metrics"].items()), flush=True)
@@ -144,8 +151,10 @@ def main() -> None:
     write_text_atomic(output / f"{NAME}.json", json.dumps(document, indent=2) + "\n")
     write_text_atomic(output / f"{NAME}.md", _markdown(table, ageing))
     _plot(table, output / f"{NAME}.png")
+    for sensor_name in sensors:
+        _plot_error_maps(runs, sensor_name, output / f"{NAME}_error_map_{sensor_name}.png")
     print(_markdown(table, ageing))
-    print(f"written {output / NAME}.json, .md, .png")
+    print(f"written {output / NAME}.json, .md, .png, _error_map_*.png")
 
 
 def _table(runs: list) -> list:
@@ -192,6 +201,27 @@ def _plot(table: list, path: Path) -> None:
     figure.tight_layout()
     with atomic_path(path) as tmp:
         figure.savefig(tmp, dpi=130)
+
+
+def _plot_error_maps(runs: list, sensor: str, path: Path) -> None:
+    """The paper's Fig. 5 for one sensor: each row's mean localisation error over the
+    skin (its seeds' contacts pooled)."""
+    from hydrotact.viz import plot_error_maps
+
+    maps = {}
+    for run in runs:
+        if run["sensor"] != sensor:
+            continue
+        entry = run["error_map"]
+        mean, count = np.array(entry["mean"], dtype=float), np.asarray(entry["count"])
+        label = f"{run['row']}, {'binned' if run['binned'] else 'plain'}"
+        total = maps.setdefault(label, {"theta_edges": np.asarray(entry["theta_edges"]), "phi_edges": np.asarray(entry["phi_edges"]), "sum": 0.0, "count": 0, "unit": entry["unit"]})
+        total["sum"] = total["sum"] + np.nan_to_num(mean) * count
+        total["count"] = total["count"] + count
+    for total in maps.values():
+        with np.errstate(invalid="ignore", divide="ignore"):
+            total["mean"] = np.where(total["count"] > 0, total.pop("sum") / np.maximum(total["count"], 1), np.nan)
+    plot_error_maps(maps, path, title=f"{sensor}: localisation error over the skin (Fig. 5), held-out contacts, seeds pooled")
 
 
 if __name__ == "__main__":

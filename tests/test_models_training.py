@@ -22,6 +22,7 @@ from hydrotact.models import (
     calc_estimator_sequence,
     calc_loss,
     calc_loss_terms,
+    calc_skin_radius,
     calc_table_metrics,
     evaluate_estimator,
     export_c_header,
@@ -331,3 +332,74 @@ def test_fine_tuning_a_pretrained_model_beats_training_from_scratch_on_a_few_rec
     for seed in (1, 2):  # against more than one initialisation: not a lucky or unlucky draw
         scratch = fine_tune_estimator(dataclasses.replace(trained, params=init_estimator(trained.spec, jax.random.PRNGKey(seed))), logs["train"], logs["test"], config)
         assert best(tuned) < best(scratch), (seed, best(tuned), best(scratch))
+
+
+def test_the_error_map_is_the_arc_length_error_per_cell(tiny, trained):
+    """calc_error_map (the paper's Fig. 5) against a loop over the contact samples: each
+    cell's mean arc length, by the true θ and φ, over π/16 cells of sphere8's ranges;
+    a contact labelled past a range's edge counts in the edge cell; the cells together
+    give the Table I arc-length mean."""
+    from hydrotact.models import calc_error_map
+
+    sensor = load_sensor("sphere8")
+    result = evaluate_estimator(trained, tiny.blocks("test"), tiny.manifest["config"]["rate_hz"], radius=0.01)
+    errors = result["location_errors"]
+    error_map = calc_error_map(errors, sensor.theta_range, sensor.phi_range)
+    assert error_map["mean"].shape == (8, 16) and error_map["unit"] == "m"
+    expected_sum, expected_count = np.zeros((8, 16)), np.zeros((8, 16), int)
+    for theta, phi, error in zip(errors["theta"], errors["phi"], errors["error"]):
+        i = min(max(int((theta - sensor.theta_range[0]) // (np.pi / 16)), 0), 7)  # beyond the range: the edge cell
+        j = min(max(int((phi - sensor.phi_range[0]) // (np.pi / 16)), 0), 15)
+        expected_sum[i, j] += error
+        expected_count[i, j] += 1
+    np.testing.assert_array_equal(error_map["count"], expected_count)
+    assert expected_count.sum() > 50 and np.count_nonzero(expected_count) > 3
+    np.testing.assert_allclose(error_map["mean"][expected_count > 0], (expected_sum / np.maximum(expected_count, 1))[expected_count > 0], rtol=1e-12)
+    assert np.all(np.isnan(error_map["mean"][expected_count == 0]))
+    beyond = (errors["theta"] < sensor.theta_range[0]) | (errors["theta"] > sensor.theta_range[1]) | (errors["phi"] < sensor.phi_range[0]) | (errors["phi"] > sensor.phi_range[1])
+    assert error_map["clamped"] == int(np.sum(beyond))
+    np.testing.assert_allclose(np.nansum(error_map["mean"] * error_map["count"]) / error_map["count"].sum(), result["metrics"]["arc_length_mean"], rtol=1e-5)
+
+
+def test_evaluate_predict_and_export_commands(tiny, trained, tmp_path, capsys):
+    """`hydrotact evaluate` prints the numbers of evaluate_estimator and writes the
+    error map and the detection plot; `hydrotact predict` streams a log (the stream's
+    estimates equal the batched ones); `hydrotact export` writes the header; a missing
+    model is one line. (In this process, as the tiny dataset is made: the programs are
+    compiled already.)"""
+    from types import SimpleNamespace
+
+    from hydrotact.cli import main
+    from hydrotact.data import BarometerLog, read_log, write_log
+    from hydrotact.models import save_estimator
+
+    def command(*args):
+        code = main([str(arg) for arg in args])
+        out, err = capsys.readouterr()
+        return SimpleNamespace(returncode=code, stdout=out, stderr=err)
+
+    model = save_estimator(trained, tmp_path / "model", "sphere8").parent
+    result = command("evaluate", model, tiny.folder, "-o", tmp_path / "evaluation", "--json")
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    radius = calc_skin_radius(load_sensor("sphere8"))
+    expected = evaluate_estimator(trained, tiny.blocks("test"), tiny.manifest["config"]["rate_hz"], radius)["metrics"]
+    for name, value in expected.items():
+        np.testing.assert_allclose(report[f"{tiny.folder}: {name}"], value, rtol=1e-4)  # the report prints 6 digits; the saved weights are float32
+    written = json.loads((tmp_path / "evaluation" / "evaluation.json").read_text())[str(tiny.folder)]
+    assert written["metrics"] == pytest.approx(expected, rel=1e-6)
+    for name in ("error_map_dataset.png", "contact_detection_dataset.png"):
+        assert str(tmp_path / "evaluation" / name) in written["pictures"] and (tmp_path / "evaluation" / name).stat().st_size > 10_000, name
+    block = tiny.blocks("test")[0]
+    metadata = {"format": "hydrotact.barometer_log", "version": 1, "sensor": "sphere8", "source": "simulated", "pressure": "absolute", "channels": list(tiny.channels)}
+    log = write_log(tmp_path / "log.parquet", BarometerLog(metadata, {name: block[name] for name in ("time", *tiny.channels)}))
+    assert command("predict", model, log, "-o", tmp_path / "estimates.parquet").returncode == 0
+    estimates = read_log(tmp_path / "estimates.parquet").columns
+    batched = predict_recording(trained, np.column_stack([block[name] for name in trained.channels]))
+    for name in ("fx", "fn", "theta", "phi"):
+        np.testing.assert_allclose(estimates[f"est_{name}"], batched[name], rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(estimates["est_contact"], batched["contact_probability"], atol=1e-6)
+    result = command("export", model, "-o", tmp_path / "model.h", "--json")
+    assert result.returncode == 0, result.stderr
+    assert "hydrotact_step" in (tmp_path / "model.h").read_text()
+    assert_one_line_error(command("evaluate", tmp_path / "no-model", tiny.folder), "no-model")

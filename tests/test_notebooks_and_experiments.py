@@ -46,14 +46,19 @@ def test_probe_sweep_smoke(tmp_path):
         assert 0.0 < centre["max_difference_from_reference_of_peak"] < 0.08, (name, centre)
 
 
-def test_ablation_table1_smoke(tmp_path):
+def test_ablation_table1_and_fine_tuning_curve_smoke(tmp_path):
     result = subprocess.run(
         [sys.executable, str(ROOT / "experiments" / "ablation_table1.py"), "--smoke", "--output", str(tmp_path)],
         capture_output=True, text=True, timeout=1800,
     )
     assert result.returncode == 0, result.stderr[-3000:]
     report = json.loads((tmp_path / "ablation_table1.json").read_text())
-    assert (tmp_path / "ablation_table1.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    for name in ("ablation_table1.png", "ablation_table1_error_map_sphere8.png"):
+        assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+    # Each run's error map (the paper's Fig. 5) pools to its arc-length mean.
+    for run in report["runs"]:
+        mean, count = np.array(run["error_map"]["mean"], dtype=float), np.asarray(run["error_map"]["count"])
+        assert np.isclose(np.nansum(mean * count) / count.sum(), run["metrics"]["arc_length_mean"], rtol=1e-5)
     rows = {(entry["row"], entry["binned"]) for entry in report["table"]}
     assert len(rows) == 8  # four models, binned and plain
     for entry in report["table"]:
@@ -62,3 +67,15 @@ def test_ablation_table1_smoke(tmp_path):
     assert paper_rnn["parameters"] == 4205  # the paper's Binned RNN on the sphere
     assert set(report["ageing"]) >= {"fresh", "aged_untared", "aged_tared"}
     assert "| sphere8 | GRU (budget) | binned |" in (tmp_path / "ablation_table1.md").read_text()
+    # The fine-tuning curve starts from the ablation's binned GRU (seed 0).
+    pretrained = tmp_path / "ablation_table1.work" / "sphere8_gru_binned_0"
+    result = subprocess.run(
+        [sys.executable, str(ROOT / "experiments" / "fine_tuning_curve.py"), "--smoke", "--pretrained", str(pretrained), "--output", str(tmp_path)],
+        capture_output=True, text=True, timeout=1800,
+    )
+    assert result.returncode == 0, result.stderr[-3000:]
+    curve = json.loads((tmp_path / "fine_tuning_curve.json").read_text())
+    assert curve["settings"]["training_recordings"] >= 2 and curve["settings"]["held_out_recordings"] >= 2
+    assert {(e["recordings"], e["start"]) for e in curve["curve"]} == {(1, "pretrained"), (1, "scratch"), (2, "pretrained"), (2, "scratch")}
+    assert all(np.isfinite(run["best_validation_loss"]) and np.isfinite(run["metrics"]["fn_rmse"]) for run in curve["runs"])
+    assert (tmp_path / "fine_tuning_curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -17,7 +17,11 @@ def add_parser(subparsers):
     parser.add_argument("model", type=Path, metavar="MODEL", help="a model folder from hydrotact train")
     parser.add_argument("sources", type=Path, nargs="+", metavar="DATASET|LOG", help="dataset folders (hydrotact generate) or labelled logs")
     parser.add_argument("--split", choices=("test", "train", "all"), default="test", help="which split of a dataset (default test, the held-out one)")
-    parser.add_argument("-o", "--output", type=Path, metavar="DIR", help="also write evaluation.json there")
+    parser.add_argument(
+        "-o", "--output", type=Path, metavar="DIR",
+        help="also write there evaluation.json and, per source, the localisation error over the skin (error_map_NAME.png, the paper's "
+        "Fig. 5; sensors with contact angles) and the two contact detectors over a stretch of it (contact_detection_NAME.png, its Fig. 7)",
+    )
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
     return parser
 
@@ -37,6 +41,8 @@ def run(args) -> None:
     for name, blocks, rate in recordings(model, args.sources, args.split):
         result = evaluate_estimator(model, blocks, rate, radius)
         everything[name] = {"metrics": result["metrics"], "detection": result["detection"]}
+        if args.output is not None:
+            everything[name]["pictures"] = _pictures(args.output, name, sensor, model, blocks, rate, result)
         report |= {f"{name}: {k}": v for k, v in result["metrics"].items()}
         for detector, values in result["detection"].items():
             report[f"{name}: {detector} accuracy"] = values["accuracy"]
@@ -45,5 +51,40 @@ def run(args) -> None:
     if args.output is not None:
         args.output.mkdir(parents=True, exist_ok=True)
         write_text_atomic(args.output / "evaluation.json", json.dumps(everything, indent=2) + "\n")
-        report["written"] = str(args.output / "evaluation.json")
+        report["written"] = ", ".join([str(args.output / "evaluation.json")] + [p for entry in everything.values() for p in entry["pictures"]])
     print_report("estimator evaluation", report, args.json)
+
+
+DETECTION_SECONDS = 20.0  # the stretch contact_detection_NAME.png shows, from 1 s before the first contact
+
+
+def _pictures(folder, name, sensor, model, blocks, rate, result) -> list:
+    """Write one source's error map and contact-detection plot; their paths."""
+    import re
+
+    import numpy as np
+
+    from ..models import CONTACT_FORCE, calc_error_map
+    from ..viz import plot_contact_detection, plot_error_maps
+
+    folder.mkdir(parents=True, exist_ok=True)
+    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(name).name.removesuffix(".parquet")) or "source"
+    written = []
+    if result["location_errors"] is not None:
+        label = f"{model.spec.architecture} {'binned' if model.spec.binned else 'plain'}"
+        error_map = calc_error_map(result["location_errors"], sensor.theta_range, sensor.phi_range)
+        plot_error_maps({label: error_map}, folder / f"error_map_{stem}.png", title=f"{name}: localisation error over the skin")
+        written.append(str(folder / f"error_map_{stem}.png"))
+    block, predicted = max(zip(blocks, result["predictions"]), key=lambda pair: int(np.sum(pair[0]["contact"] > 0)))
+    touching = np.flatnonzero(np.asarray(block["contact"]) > 0)
+    first = max(0, int(touching[0]) - int(rate)) if len(touching) else 0
+    window = slice(first, first + int(DETECTION_SECONDS * rate))
+    times = block["time"] if "time" in block else np.arange(len(block["contact"])) / rate
+    force = np.linalg.norm(np.column_stack([block[k] for k in ("fx", "fy", "fz")]), axis=1)
+    estimate = np.linalg.norm(np.column_stack([predicted[k] for k in ("fx", "fy", "fz")]), axis=1)
+    plot_contact_detection(
+        np.asarray(times)[window], force[window], np.asarray(block["contact"])[window], predicted["contact_probability"][window], estimate[window],
+        folder / f"contact_detection_{stem}.png", threshold=CONTACT_FORCE, title=f"{name}: contact detection",
+    )
+    written.append(str(folder / f"contact_detection_{stem}.png"))
+    return written

@@ -27,6 +27,7 @@ from ._estimator import make_initial_state as make_initial_state
 from ._evaluate import CONTACT_FORCE as CONTACT_FORCE
 from ._evaluate import StreamingEstimator as StreamingEstimator
 from ._evaluate import calc_detection as calc_detection
+from ._evaluate import calc_error_map as calc_error_map
 from ._evaluate import calc_skin_radius as calc_skin_radius
 from ._evaluate import evaluate_estimator as evaluate_estimator
 from ._evaluate import predict_recording as predict_recording

@@ -14,8 +14,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._bins import BIN_WIDTH
 from ._estimator import calc_estimator_sequence, calc_estimator_step, decode_estimator_outputs, make_initial_state
-from ._loss import calc_table_metrics
+from ._loss import calc_arc_length, calc_table_metrics
 from ._sequences import FORCE_COLUMNS
 
 CONTACT_FORCE = 0.1
@@ -112,7 +113,9 @@ def evaluate_estimator(trained, blocks: list, rate_hz: float, radius: float | No
     fn in N, of theta and phi in rad over contact samples, contact BCE), the mean
     arc-length error (m, with the sensor's `radius`), and two contact detectors (the
     predicted probability above 0.5; the predicted |F| above :data:`CONTACT_FORCE`).
-    Returns {"metrics", "detection", "predictions" (per block)}."""
+    Returns {"metrics", "detection", "predictions" (per block), "location_errors"
+    (over the contact samples, for :func:`calc_error_map`; None on a sensor without
+    angles)}."""
     spec = trained.spec
     raws, predictions, targets = [], [], []
     for block in blocks:
@@ -138,7 +141,41 @@ def evaluate_estimator(trained, blocks: list, rate_hz: float, radius: float | No
         "contact_head": calc_detection(truth, probability > 0.5, rate_hz),
         "force_threshold": calc_detection(truth, magnitude > CONTACT_FORCE, rate_hz),
     }
-    return {"metrics": metrics, "detection": detection, "predictions": predictions}
+    return {"metrics": metrics, "detection": detection, "predictions": predictions, "location_errors": _location_errors(spec, targets, predictions, radius)}
+
+
+def _location_errors(spec, targets, predictions, radius) -> dict | None:
+    """Over the contact samples with angles (as Table I's angle metrics): the true θ,
+    φ (rad) and the distance to the estimate, the arc length of Eq. 2 (m) on a sphere
+    of `radius`, else the angle between the two contact directions (rad)."""
+    if not spec.angles:
+        return None
+    theta, phi = (np.concatenate([t[name] for t in targets]).astype(np.float64) for name in ("theta", "phi"))
+    estimate = {name: np.concatenate([p[name] for p in predictions]).astype(np.float64) for name in ("theta", "phi")}
+    touching = (np.concatenate([t["contact"] for t in targets]) > 0) & np.isfinite(theta) & np.isfinite(phi)
+    theta, phi = theta[touching], phi[touching]
+    error = np.asarray(calc_arc_length(theta, phi, estimate["theta"][touching], estimate["phi"][touching], 1.0 if radius is None else radius))
+    return {"theta": theta, "phi": phi, "error": error, "unit": "rad" if radius is None else "m"}
+
+
+def calc_error_map(location_errors: dict, theta_range, phi_range, width: float = BIN_WIDTH) -> dict:
+    """The paper's Fig. 5: the mean localisation error over the skin, in cells of
+    `width` (rad, π/16 as the angle bins) over the sensor's θ and φ ranges, by the
+    true contact angles (`location_errors` from :func:`evaluate_estimator`). Returns
+    {"theta_edges" (A+1,), "phi_edges" (B+1,), "mean" (A, B) NaN where no contact fell,
+    "count" (A, B), "clamped", "unit"}. A contact labelled beyond a range (a patch's
+    centre can sit past the touchable skin's edge, where a tilted probe presses over
+    it) counts in the edge cell nearest to it; "clamped" says how many did. So the
+    cells together give the mean over every contact, as Table I's arc length does."""
+    edges = [np.linspace(low, high, max(1, int(np.ceil((high - low) / width - 1e-9))) + 1) for low, high in (theta_range, phi_range)]
+    raw = (np.asarray(location_errors["theta"]), np.asarray(location_errors["phi"]))
+    samples = tuple(np.clip(angles, edge[0], edge[-1]) for angles, edge in zip(raw, edges))
+    count, _, _ = np.histogram2d(*samples, bins=edges)
+    total, _, _ = np.histogram2d(*samples, bins=edges, weights=np.asarray(location_errors["error"]))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(count > 0, total / count, np.nan)
+    return {"theta_edges": edges[0], "phi_edges": edges[1], "mean": mean, "count": count.astype(int),
+            "clamped": int(np.sum((samples[0] != raw[0]) | (samples[1] != raw[1]))), "unit": location_errors["unit"]}
 
 
 def calc_skin_radius(sensor, tolerance: float = 0.01) -> float | None:

@@ -1,6 +1,8 @@
 """Pictures: pyvista renders and matplotlib plots. Never imported by the stages."""
 
 from ._dataset import plot_dataset as plot_dataset
+from ._estimator import plot_contact_detection as plot_contact_detection
+from ._estimator import plot_error_maps as plot_error_maps
 from ._fit import plot_fit as plot_fit
 from ._plots import plot_log as plot_log
 from ._plots import save_figure as save_figure

@@ -1,0 +1,63 @@
+"""Plots of a trained estimator's evaluation (PNG, written atomically): the
+localisation error over the skin (the barometric estimation paper's Fig. 5) and the
+two contact detectors over a stretch of a recording (its Fig. 7)."""
+
+import numpy as np
+
+from ._plots import new_figure, save_figure
+
+
+def plot_error_maps(maps: dict, path, title: str = "") -> None:
+    """One panel per map (`maps`: label -> :func:`hydrotact.models.calc_error_map`'s
+    result, on the same cells), the mean error per cell (mm on a sphere, degrees
+    otherwise) on one colour scale, over φ (longitude, across) and θ (latitude, up);
+    cells no contact fell in are left blank, each cell's count is written in it when
+    there are few cells."""
+    labels = list(maps)
+    first = maps[labels[0]]
+    scale, unit = (1e3, "mm") if first["unit"] == "m" else (180.0 / np.pi, "deg")
+    values = [scale * np.asarray(maps[label]["mean"]) for label in labels]
+    finite = np.concatenate([v[np.isfinite(v)] for v in values] + [np.zeros(1)])
+    top = float(finite.max()) or 1.0
+    columns = min(4, len(labels))
+    rows = -(-len(labels) // columns)
+    figure, axes = new_figure(rows, columns, figsize=(3.6 * columns + 1.0, 3.0 * rows + 0.6), squeeze=False)
+    image = None
+    for axis, label, value in zip(axes.flat, labels, values):
+        entry = maps[label]
+        phi, theta = np.degrees(entry["phi_edges"]), np.degrees(entry["theta_edges"])
+        image = axis.pcolormesh(phi, theta, np.ma.masked_invalid(value), vmin=0.0, vmax=top, cmap="viridis")
+        if value.size <= 160:
+            for i, j in zip(*np.nonzero(np.asarray(entry["count"]))):
+                axis.text(0.5 * (phi[j] + phi[j + 1]), 0.5 * (theta[i] + theta[i + 1]), str(entry["count"][i, j]), ha="center", va="center", fontsize=5, color="w")
+        mean = float(np.nansum(value * entry["count"]) / max(1, np.sum(entry["count"])))
+        axis.set_title(f"{label}\nmean {mean:.3g} {unit}", fontsize=8)
+        axis.set_xlabel("φ (deg)")
+        axis.set_ylabel("θ (deg)")
+        axis.set_aspect("equal")
+    for axis in list(axes.flat)[len(labels):]:
+        axis.set_visible(False)
+    figure.colorbar(image, ax=axes.ravel().tolist(), label=f"mean localisation error ({unit})", shrink=0.85)
+    if title:
+        figure.suptitle(title, fontsize=9)
+    save_figure(figure, path)
+
+
+def plot_contact_detection(times, force, contact, probability, predicted_force, path, threshold: float = 0.1, title: str = "") -> None:
+    """The true |F| over time with the samples each detector calls contact shaded: the
+    contact head (probability over 0.5) above, the predicted |F| over `threshold` N
+    below; the true contact flag as a line under each."""
+    times = np.asarray(times) - float(np.asarray(times)[0])
+    figure, axes = new_figure(2, 1, figsize=(9, 5), sharex=True)
+    for axis, detected, name in ((axes[0], np.asarray(probability) > 0.5, "contact head (p > 0.5)"), (axes[1], np.asarray(predicted_force) > threshold, f"predicted |F| > {threshold:g} N")):
+        axis.plot(times, force, color="k", linewidth=0.8, label="true |F|")
+        top = max(float(np.max(force)), 1e-6) * 1.05
+        axis.fill_between(times, 0.0, top, where=detected, color="tab:orange", alpha=0.3, step="mid", label=f"detected: {name}")
+        axis.plot(times, -0.04 * top * (1 - np.asarray(contact)), color="tab:blue", linewidth=0.8, label="true flag (low: no contact)")
+        axis.set_ylabel("|F| (N)")
+        axis.legend(fontsize=7, loc="upper right")
+    axes[1].set_xlabel("time (s)")
+    if title:
+        axes[0].set_title(title, fontsize=9)
+    figure.tight_layout()
+    save_figure(figure, path)
