@@ -149,11 +149,12 @@ def main() -> None:
     }
     output.mkdir(parents=True, exist_ok=True)
     write_text_atomic(output / f"{NAME}.json", json.dumps(document, indent=2) + "\n")
-    write_text_atomic(output / f"{NAME}.md", _markdown(table, ageing))
+    settings = f"{args.events} events per dataset, {args.seeds} seed(s), at most {args.max_epochs} epochs{' (smoke)' if args.smoke else ''}; {document['timings_s']['total'] / 60:.0f} min in all."
+    write_text_atomic(output / f"{NAME}.md", settings + " " + _markdown(table, ageing))
     _plot(table, output / f"{NAME}.png")
     for sensor_name in sensors:
         _plot_error_maps(runs, sensor_name, output / f"{NAME}_error_map_{sensor_name}.png")
-    print(_markdown(table, ageing))
+    print(settings + " " + _markdown(table, ageing))
     print(f"written {output / NAME}.json, .md, .png, _error_map_*.png")
 
 
