@@ -230,7 +230,8 @@ ONSET_RESCANS = 2  # at most this many site-onset scans (and re-solves) after a 
 # (test_press_fit's stand-in), a site's onset can move 100-300 µm along the valley for
 # an own χ² lower by 3.7 (and the solver's by 33) over 6943 residuals, which says
 # nothing; the onsets then stay near their estimates from the travel. On a log the
-# model fits exactly, the trap a rescan is for costs 44 (test_lumped).
+# model fits exactly, the trap a rescan is for costs 44 (test_lumped). In units of the
+# residuals' own scatter: times the χ² per residual where that is above 1.
 ONSET_RESCAN_MIN_GAIN = 10.83
 
 
@@ -242,9 +243,11 @@ def solve_press_scanned(layout: PressLayout, solver, max_steps: int, x0, args):
     """The solve from x0, then while a scan of each site's common onset shift
     (:func:`scan_site_onsets`) lowers the solver's χ², a re-solve from the scan's
     best (at most ONSET_RESCANS times), kept when it lowers the model's own χ² by
-    more than ONSET_RESCAN_MIN_GAIN: a site's onsets and its law nearly trade, and the
-    solver alone can end with every press at a site early by the same amount.
+    more than ONSET_RESCAN_MIN_GAIN (times the χ² per residual, where above 1): a
+    site's onsets and its law nearly trade, and the solver alone can end with every
+    press at a site early by the same amount.
     Returns (the solution, its outputs (:func:`_press_outputs`), its own χ²)."""
+    num_residuals = max(1, sum(int(jnp.sum(data.weights > 0.0)) for data in args[0]))
     solution = _solve_press(layout, solver, max_steps, x0, args)
     outputs = _press_outputs(layout, solution.value, args)
     chi_square = _own_chi_square(outputs)
@@ -256,7 +259,7 @@ def solve_press_scanned(layout: PressLayout, solver, max_steps: int, x0, args):
         rescanned = _solve_press(layout, solver, max_steps, x, args)
         rescanned_outputs = _press_outputs(layout, rescanned.value, args)
         rescanned_chi_square = _own_chi_square(rescanned_outputs)
-        if not rescanned_chi_square < chi_square - ONSET_RESCAN_MIN_GAIN:
+        if not rescanned_chi_square < chi_square - ONSET_RESCAN_MIN_GAIN * max(1.0, chi_square / num_residuals):
             break
         solution, outputs, chi_square = rescanned, rescanned_outputs, rescanned_chi_square
     return solution, outputs, chi_square
