@@ -11,8 +11,7 @@ def plot_error_maps(maps: dict, path, title: str = "") -> None:
     """One panel per map (`maps`: label -> :func:`hydrotact.models.calc_error_map`'s
     result, on the same cells), the mean error per cell (mm on a sphere, degrees
     otherwise) on one colour scale, over φ (longitude, across) and θ (latitude, up);
-    cells no contact fell in are left blank, each cell's count is written in it when
-    there are few cells."""
+    cells no contact fell in are left blank."""
     labels = list(maps)
     first = maps[labels[0]]
     scale, unit = (1e3, "mm") if first["unit"] == "m" else (180.0 / np.pi, "deg")
@@ -21,20 +20,17 @@ def plot_error_maps(maps: dict, path, title: str = "") -> None:
     top = float(finite.max()) or 1.0
     columns = min(4, len(labels))
     rows = -(-len(labels) // columns)
-    figure, axes = new_figure(rows, columns, figsize=(3.6 * columns + 1.0, 3.0 * rows + 0.6), squeeze=False)
+    figure, axes = new_figure(rows, columns, figsize=(3.8 * columns + 1.2, 2.9 * rows + 0.8), squeeze=False)
+    figure.subplots_adjust(left=0.06, right=0.86, bottom=0.12, top=0.82, wspace=0.35, hspace=0.6)
     image = None
     for axis, label, value in zip(axes.flat, labels, values):
         entry = maps[label]
         phi, theta = np.degrees(entry["phi_edges"]), np.degrees(entry["theta_edges"])
         image = axis.pcolormesh(phi, theta, np.ma.masked_invalid(value), vmin=0.0, vmax=top, cmap="viridis")
-        if value.size <= 160:
-            for i, j in zip(*np.nonzero(np.asarray(entry["count"]))):
-                axis.text(0.5 * (phi[j] + phi[j + 1]), 0.5 * (theta[i] + theta[i + 1]), str(entry["count"][i, j]), ha="center", va="center", fontsize=5, color="w")
         mean = float(np.nansum(value * entry["count"]) / max(1, np.sum(entry["count"])))
-        axis.set_title(f"{label}\nmean {mean:.3g} {unit}", fontsize=8)
+        axis.set_title(f"{label}\nmean {mean:.3g} {unit}, {int(np.sum(entry['count']))} contact samples", fontsize=8)
         axis.set_xlabel("φ (deg)")
         axis.set_ylabel("θ (deg)")
-        axis.set_aspect("equal")
     for axis in list(axes.flat)[len(labels):]:
         axis.set_visible(False)
     figure.colorbar(image, ax=axes.ravel().tolist(), label=f"mean localisation error ({unit})", shrink=0.85)
