@@ -379,7 +379,9 @@ def test_evaluate_predict_and_export_commands(tiny, trained, tmp_path, capsys):
         return SimpleNamespace(returncode=code, stdout=out, stderr=err)
 
     model = save_estimator(trained, tmp_path / "model", "sphere8").parent
-    result = command("evaluate", model, tiny.folder, "-o", tmp_path / "evaluation", "--json")
+    (tmp_path / "copy").mkdir()
+    (tmp_path / "copy" / "dataset").symlink_to(tiny.folder, target_is_directory=True)  # a second source of the same name
+    result = command("evaluate", model, tiny.folder, tmp_path / "copy" / "dataset", "-o", tmp_path / "evaluation", "--json")
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)
     radius = calc_skin_radius(load_sensor("sphere8"))
@@ -390,6 +392,8 @@ def test_evaluate_predict_and_export_commands(tiny, trained, tmp_path, capsys):
     assert written["metrics"] == pytest.approx(expected, rel=1e-6)
     for name in ("error_map_dataset.png", "contact_detection_dataset.png"):
         assert str(tmp_path / "evaluation" / name) in written["pictures"] and (tmp_path / "evaluation" / name).stat().st_size > 10_000, name
+    second = json.loads((tmp_path / "evaluation" / "evaluation.json").read_text())[str(tmp_path / "copy" / "dataset")]
+    assert second["pictures"] == [str(tmp_path / "evaluation" / f"{kind}_dataset_2.png") for kind in ("error_map", "contact_detection")]
     block = tiny.blocks("test")[0]
     metadata = {"format": "hydrotact.barometer_log", "version": 1, "sensor": "sphere8", "source": "simulated", "pressure": "absolute", "channels": list(tiny.channels)}
     log = write_log(tmp_path / "log.parquet", BarometerLog(metadata, {name: block[name] for name in ("time", *tiny.channels)}))

@@ -37,12 +37,12 @@ def run(args) -> None:
     document = json.loads((args.model / "model.json").read_text())
     sensor = load_sensor(document["sensor"])
     radius = calc_skin_radius(sensor)
-    report, everything = {"model": str(args.model)}, {}
+    report, everything, stems = {"model": str(args.model)}, {}, set()
     for name, blocks, rate in recordings(model, args.sources, args.split):
         result = evaluate_estimator(model, blocks, rate, radius)
         everything[name] = {"metrics": result["metrics"], "detection": result["detection"]}
         if args.output is not None:
-            everything[name]["pictures"] = _pictures(args.output, name, sensor, model, blocks, rate, result)
+            everything[name]["pictures"] = _pictures(args.output, _stem(name, stems), sensor, model, blocks, rate, result)
         report |= {f"{name}: {k}": v for k, v in result["metrics"].items()}
         for detector, values in result["detection"].items():
             report[f"{name}: {detector} accuracy"] = values["accuracy"]
@@ -58,22 +58,33 @@ def run(args) -> None:
 DETECTION_SECONDS = 20.0  # the stretch contact_detection_NAME.png shows, from 1 s before the first contact
 
 
-def _pictures(folder, name, sensor, model, blocks, rate, result) -> list:
-    """Write one source's error map and contact-detection plot; their paths."""
+def _stem(name: str, taken: set) -> str:
+    """A file-name stem for a source's pictures (added to `taken`): its base name,
+    numbered when an earlier source of this run had the same one (two datasets both
+    called `dataset`)."""
     import re
 
+    base = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(name).name.removesuffix(".parquet")) or "source"
+    stem, count = base, 2
+    while stem in taken:
+        stem, count = f"{base}_{count}", count + 1
+    taken.add(stem)
+    return stem
+
+
+def _pictures(folder, stem, sensor, model, blocks, rate, result) -> list:
+    """Write one source's error map and contact-detection plot; their paths."""
     import numpy as np
 
     from ..models import CONTACT_FORCE, calc_error_map
     from ..viz import plot_contact_detection, plot_error_maps
 
     folder.mkdir(parents=True, exist_ok=True)
-    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(name).name.removesuffix(".parquet")) or "source"
     written = []
     if result["location_errors"] is not None:
         label = f"{model.spec.architecture} {'binned' if model.spec.binned else 'plain'}"
         error_map = calc_error_map(result["location_errors"], sensor.theta_range, sensor.phi_range)
-        plot_error_maps({label: error_map}, folder / f"error_map_{stem}.png", title=f"{name}: localisation error over the skin")
+        plot_error_maps({label: error_map}, folder / f"error_map_{stem}.png", title=f"{stem}: localisation error over the skin")
         written.append(str(folder / f"error_map_{stem}.png"))
     block, predicted = max(zip(blocks, result["predictions"]), key=lambda pair: int(np.sum(pair[0]["contact"] > 0)))
     touching = np.flatnonzero(np.asarray(block["contact"]) > 0)
@@ -84,7 +95,7 @@ def _pictures(folder, name, sensor, model, blocks, rate, result) -> list:
     estimate = np.linalg.norm(np.column_stack([predicted[k] for k in ("fx", "fy", "fz")]), axis=1)
     plot_contact_detection(
         np.asarray(times)[window], force[window], np.asarray(block["contact"])[window], predicted["contact_probability"][window], estimate[window],
-        folder / f"contact_detection_{stem}.png", threshold=CONTACT_FORCE, title=f"{name}: contact detection",
+        folder / f"contact_detection_{stem}.png", threshold=CONTACT_FORCE, title=f"{stem}: contact detection",
     )
     written.append(str(folder / f"contact_detection_{stem}.png"))
     return written
