@@ -9,7 +9,7 @@ import numpy as np
 
 from hydrotact.sysid._lumped import LAG_BOUND, ONSET_HALF_RANGE, PressLayout, calc_press_jacobian, calc_press_predictions, calc_press_residuals, press_residual_fn
 from hydrotact.sysid._press_data import drift_basis
-from hydrotact.sysid._press_fit import solve_press_scanned
+from hydrotact.sysid._press_solve import solve_press_scanned
 from hydrotact.sysid._press_windows import DEPTH_SCALE, POWERS, calc_bases, calc_depths, make_press_data
 from hydrotact.sysid._solve import solve_least_squares
 from hydrotact.visco import Prony, calc_hereditary_integral

@@ -21,7 +21,7 @@ from hydrotact import HydrotactError
 from hydrotact.cli import main
 from hydrotact.data import write_log
 from hydrotact.sim import FINGERTIP_SENSOR, StageSession, make_site_grid, simulate_stage_log
-from hydrotact.sysid import _press_fit as press_fit_module
+from hydrotact.sysid import _press_solve as press_solve_module
 from hydrotact.sysid import compare_fit, fit_press_logs, write_press_fit_outputs
 from hydrotact.sysid._press_data import SITE_RESPONSE_SNR, site_responses
 from hydrotact.visco import Prony
@@ -104,9 +104,9 @@ def test_a_fit_far_from_the_noise_tries_other_shapes(one_log_fit, stand_in, monk
     and at 1.01 from the second.)"""
     default, truth, _ = one_log_fit
     path, log, _ = stand_in["calibration"][0]
-    monkeypatch.setattr(press_fit_module, "SHAPE_STARTS", ((0.05, 0.01), *press_fit_module.SHAPE_STARTS))
+    monkeypatch.setattr(press_solve_module, "SHAPE_STARTS", ((0.05, 0.01), *press_solve_module.SHAPE_STARTS))
     alone = fit_press_logs([log], [str(path)], terms=2, estimate_lag=True, saturation_pa=125e3, starts=1)
-    assert alone.num_starts == 1 and alone.reduced_chi_square > press_fit_module.RESTART_REDUCED_CHI2
+    assert alone.num_starts == 1 and alone.reduced_chi_square > press_solve_module.RESTART_REDUCED_CHI2
     again = fit_press_logs([log], [str(path)], terms=2, estimate_lag=True, saturation_pa=125e3)
     assert again.num_starts == 2 and default.num_starts == 1
     assert again.chi_square == pytest.approx(default.chi_square, rel=1e-9)

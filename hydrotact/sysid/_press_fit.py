@@ -28,28 +28,18 @@ value is *not identified* — its value is the solver's last word, not a measure
 import dataclasses
 import math
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._errors import HydrotactError
 from ._fit import CHI_SQUARE_WARNING, identify_time
-from ._lumped import (
-    LAG_BOUND,
-    ONSET_HALF_RANGE,
-    PressLayout,
-    calc_elastic,
-    calc_press_jacobian,
-    press_residual_fn,
-    scan_site_onsets,
-    solve_baselines,
-    solve_linear,
-)
-from ._press_data import DRIFT_KNOT_S, PressLog, prepare_press_logs, site_responses
+from ._lumped import LAG_BOUND, ONSET_HALF_RANGE
+from ._press_data import DRIFT_KNOT_S, prepare_press_logs
+from ._press_solve import SHAPE_STARTS, fit_terms
 from ._press_windows import POWERS
 from ._presses import POSITION_COLUMNS, PRESS_THRESHOLD
-from ._solve import make_solver, solve_least_squares, solver_name
+from ._solve import make_solver, solver_name
 
 MAX_TERMS = 3  # Prony terms the lumped model tries with terms="auto"
 
@@ -128,24 +118,6 @@ class PressFit:
         return [log.observed - residual * log.noise[None, :] for log, residual in zip(self.logs, self.residuals)]
 
 
-def _press_durations(log: PressLog) -> np.ndarray:
-    """(P,) each press's duration, s."""
-    return np.array([np.ptp(log.times[log.press == p]) for p in range(len(log.onset_start))])
-
-
-# The shape's starts (factor on the τ grid, Eᵢ/E∞), tried in turn while the fit ends
-# far from the noise (starts="auto"), or all of the first N (starts=N). With a law of
-# its own per site, an onset can trade against the shape, and the push's active set
-# changes in steps: on notebook 02's stage log cut before its gap (2 presses, 40 %
-# relaxation), the first start ends at a reduced χ² of 10.8 (τ 2.3 s and 118 s), the
-# second at 1.01, at the true shape. Not every minimum is escaped so: with presses of
-# varied depths (0.3-0.7 mm) on the test stand-in, the first start ends at 1.38 (τ 2.3
-# s and 108 s, below the restart threshold; the other starts end higher), where a start
-# at the true shape reaches 0.98.
-SHAPE_STARTS = ((1.0, 0.05), (0.3, 0.3), (3.0, 0.3))
-RESTART_REDUCED_CHI2 = 1.5  # starts="auto": a fit that ends above this is tried from the next start
-
-
 def parse_starts(text) -> int | str:
     """--starts: 'auto' or a number of shape starts (1 to len(SHAPE_STARTS))."""
     if str(text) == "auto":
@@ -157,135 +129,6 @@ def parse_starts(text) -> int | str:
     if value is None or not 1 <= value <= len(SHAPE_STARTS):
         raise HydrotactError(f"--starts: expected auto or 1 to {len(SHAPE_STARTS)} starts, got {text!r}")
     return value
-
-
-def _initial_x(layout: PressLayout, logs: list[PressLog], lag: float = 0.0, start: tuple[float, float] = SHAPE_STARTS[0]) -> np.ndarray:
-    """The shape's start: the terms' τ spread log-evenly inside [4 sampling steps,
-    the median press] (the time scales a press can show), times start[0], each Eᵢ/E∞
-    start[1]; onsets at their estimates; lags at the given lag."""
-    step = float(np.median(np.concatenate([np.diff(log.times) for log in logs])))
-    durations = np.concatenate([_press_durations(log) for log in logs])
-    k = layout.num_terms
-    taus = np.geomspace(4 * step, max(float(np.median(durations)), 40 * step), k + 2)[1:-1] * start[0]
-    parts = [np.log(np.full(k, start[1])), np.log(taus), np.zeros(sum(layout.num_presses))]
-    if layout.estimate_lag:
-        parts.append(np.full(len(logs), math.atanh(float(lag) / LAG_BOUND)))
-    return np.concatenate(parts)
-
-
-@eqx.filter_jit
-def _solve_press(layout, solver, max_steps, x0, args):
-    """The jitted solve (compiled once per layout, solver and step cap; reused by
-    later fits of logs of the same sizes)."""
-    return solve_least_squares(press_residual_fn(layout), x0, args, solver, max_steps=max_steps, throw=False)
-
-
-POLISH_PASSES = 6  # more active-set passes at the solution, for the model's own χ²
-
-
-def _own_residuals(datas, bases, contact, amplitudes):
-    """The model's own weighted residuals per log (T, C) for the given amplitudes
-    (the baseline + max(0, Σ A B) in contact, each log's baseline solved given them)
-    and the baselines per log (C, D)."""
-    residuals, baselines = [], []
-    for data, basis, touching in zip(datas, bases, contact):
-        elastic = calc_elastic(basis, touching, amplitudes)
-        coefficients = solve_baselines(data.baseline, data.observed - elastic, data.weights > 0.0)
-        residuals.append((data.observed - elastic - data.baseline @ coefficients.T) * data.weights)
-        baselines.append(coefficients)
-    return residuals, baselines
-
-
-@eqx.filter_jit
-def _press_outputs(layout, x, args):
-    """At x: (the weighted residuals per log, baselines, amplitudes) and the
-    Jacobian. The residuals are the model's own, as `compare` predicts a log: the
-    baseline + max(0, Σ A B) in contact, each log's baseline solved given the
-    amplitudes. The solver's projection found where the elastic part pushes from the
-    amplitudes of a pass before, and where that cut a push off, the law was left
-    free; so the amplitudes are those of the projection or of up to POLISH_PASSES
-    further passes (each solved where the one before pushes), whichever gives each
-    channel the lowest own χ²."""
-    _, jacobian, amplitudes, bases, contact, sensitivity = calc_press_jacobian(layout, x, args, linear=True)
-    datas = args[0]
-    best = (amplitudes, *_own_residuals(datas, bases, contact, amplitudes))
-    touching = [jnp.broadcast_to(c[:, None], data.observed.shape) for c, data in zip(contact, datas)]
-    for _ in range(POLISH_PASSES):
-        actives = [t & (jnp.einsum("tsj,csj->tc", basis, amplitudes) > 0.0) for t, basis in zip(touching, bases)]
-        amplitudes = solve_linear(bases, datas, actives)[1]
-        residuals, baselines = _own_residuals(datas, bases, contact, amplitudes)
-        better = sum(jnp.sum(r**2, axis=0) for r in residuals) < sum(jnp.sum(r**2, axis=0) for r in best[1])  # (C,)
-        best = (
-            jnp.where(better[:, None, None], amplitudes, best[0]),
-            [jnp.where(better[None, :], r, old) for r, old in zip(residuals, best[1])],
-            [jnp.where(better[:, None], b, old) for b, old in zip(baselines, best[2])],
-        )
-    amplitudes, residuals, baselines = best
-    return (residuals, baselines, amplitudes), jacobian, sensitivity
-
-
-ONSET_RESCANS = 2  # at most this many site-onset scans (and re-solves) after a start's solve
-# A rescan's minimum replaces the solver's only when the model's own χ² falls by more
-# than χ²(1)'s 0.1 % point: where the lumped law only approximates a curved skin
-# (test_press_fit's stand-in), a site's onset can move 100-300 µm along the valley for
-# an own χ² lower by 3.7 (and the solver's by 33) over 6943 residuals, which says
-# nothing; the onsets then stay near their estimates from the travel. On a log the
-# model fits exactly, the trap a rescan is for costs 44 (test_lumped). In units of the
-# residuals' own scatter: times the χ² per residual where that is above 1.
-ONSET_RESCAN_MIN_GAIN = 10.83
-
-
-def _own_chi_square(outputs) -> float:
-    return float(sum(jnp.sum(r**2) for r in outputs[0][0]))
-
-
-def solve_press_scanned(layout: PressLayout, solver, max_steps: int, x0, args):
-    """The solve from x0, then while a scan of each site's common onset shift
-    (:func:`scan_site_onsets`) lowers the solver's χ², a re-solve from the scan's
-    best (at most ONSET_RESCANS times), kept when it lowers the model's own χ² by
-    more than ONSET_RESCAN_MIN_GAIN (times the χ² per residual, where above 1): a
-    site's onsets and its law nearly trade, and the solver alone can end with every
-    press at a site early by the same amount.
-    Returns (the solution, its outputs (:func:`_press_outputs`), its own χ²)."""
-    num_residuals = max(1, sum(int(jnp.sum(data.weights > 0.0)) for data in args[0]))
-    solution = _solve_press(layout, solver, max_steps, x0, args)
-    outputs = _press_outputs(layout, solution.value, args)
-    chi_square = _own_chi_square(outputs)
-    for _ in range(ONSET_RESCANS):
-        current = float(jnp.sum(press_residual_fn(layout)(solution.value, args) ** 2))
-        x, cost = scan_site_onsets(layout, solution.value, args)
-        if not cost < current * (1.0 - 1e-6):
-            break
-        rescanned = _solve_press(layout, solver, max_steps, x, args)
-        rescanned_outputs = _press_outputs(layout, rescanned.value, args)
-        rescanned_chi_square = _own_chi_square(rescanned_outputs)
-        if not rescanned_chi_square < chi_square - ONSET_RESCAN_MIN_GAIN * max(1.0, chi_square / num_residuals):
-            break
-        solution, outputs, chi_square = rescanned, rescanned_outputs, rescanned_chi_square
-    return solution, outputs, chi_square
-
-
-def _fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps, starts, num_used, num_linear):
-    """Fit `num_terms` terms from the shape starts in turn (starts "auto": until one
-    ends at a reduced χ², the model's own, below RESTART_REDUCED_CHI2; N: the first
-    N): (the lowest own χ²'s layout, args, solution, (own χ², solver's χ²), outputs,
-    the number of starts tried)."""
-    layout = PressLayout(num_terms, tuple(len(log.onset_start) for log in logs), estimate_lag)
-    responds = site_responses(logs, num_sites)
-    datas = tuple(log.to_data(num_sites, responds) for log in logs)
-    args = (datas, tuple(jnp.asarray(log.onset_start) for log in logs), tuple(jnp.asarray(float(lag)) for _ in logs))
-    dof = max(num_used - layout.size - num_linear, 1)
-    best, tried = None, 0
-    candidates = SHAPE_STARTS if starts == "auto" else SHAPE_STARTS[:starts]
-    for start in candidates if num_terms else candidates[:1]:  # no terms, no shape to start
-        tried += 1
-        solution, outputs, chi_square = solve_press_scanned(layout, solver, max_steps, jnp.asarray(_initial_x(layout, logs, lag, start)), args)
-        if best is None or chi_square < best[3][0]:
-            solver_chi_square = float(jnp.sum(press_residual_fn(layout)(solution.value, args) ** 2))
-            best = (layout, args, solution, (chi_square, solver_chi_square), outputs)
-        if starts == "auto" and best[3][0] / dof < RESTART_REDUCED_CHI2:
-            break
-    return *best, tried
 
 
 def fit_press_logs(
@@ -340,7 +183,7 @@ def _fit_press_logs(logs, sources, *, terms, indentation, position_columns, drif
     counts = range(1, MAX_TERMS + 1) if terms == "auto" else [terms]
     best = None
     for count in counts:
-        layout, args, solution, chi_squares, outputs, tried = _fit_terms(count, prepared, len(sites), estimate_lag, lag, solver, max_steps, starts, num_used, num_linear)
+        layout, args, solution, chi_squares, outputs, tried = fit_terms(count, prepared, len(sites), estimate_lag, lag, solver, max_steps, starts, num_used, num_linear)
         bic = chi_squares[0] + (layout.size + num_linear) * math.log(num_used)
         if best is None or bic < best[0]:
             best = (bic, count, layout, args, solution, chi_squares, outputs, tried)
