@@ -56,13 +56,13 @@ NAME = "ablation_table1"
 MATERIAL = (6e6, [2.5e6, 1.5e6], [0.8, 12.0])
 AGED = (6e6 * 1.3, [2.5e6, 1.5e6], [0.8, 24.0])
 ROWS = (("gru", None, "GRU (budget)"), ("gru", (18, 18), "GRU (= RNN count)"), ("rnn", None, "RNN (paper)"), ("mlp", None, "MLP (paper)"))
+# Smoke: the test suite's tiny regime (8 rays, short holds and gaps, fast presses).
+SMOKE_REGIME = dict(num_rays=8, hold_range=(0.3, 0.8), gap_range=(0.2, 0.4), speed_range=(0.01, 0.02), force_range=(0.2, 4.0))
 METRICS = ("fx_rmse", "fy_rmse", "fz_rmse", "fn_rmse", "theta_rmse", "phi_rmse", "contact_bce", "arc_length_mean")
 
 def _dataset(folder: Path, sensor: str, material: tuple, events: int, smoke: bool) -> Path:
     material_file = write_material(folder.parent / f"{folder.name}.material.json", make_material_document(*material, name=folder.name))
-    # Smoke: the test suite's tiny regime (8 rays, short holds and gaps, fast presses).
-    quick = dict(num_rays=8, hold_range=(0.3, 0.8), gap_range=(0.2, 0.4), speed_range=(0.01, 0.02), force_range=(0.2, 4.0))
-    config = DatasetConfig(events=events, **(quick if smoke else {}))
+    config = DatasetConfig(events=events, **(SMOKE_REGIME if smoke else {}))
     generate_dataset(sensor, folder, material=material_file, config=config, progress=not smoke)
     return folder
 

@@ -36,6 +36,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
+from ablation_table1 import SMOKE_REGIME  # noqa: E402  (its neighbour in experiments/: the same tiny regime)
 
 from hydrotact._files import atomic_path, write_text_atomic  # noqa: E402
 from hydrotact.data import BarometerLog, make_material_document, read_log, write_log, write_material  # noqa: E402
@@ -59,8 +60,7 @@ METRICS = ("fn_rmse", "fx_rmse", "theta_rmse", "phi_rmse", "contact_bce", "arc_l
 
 def _stand_in(folder: Path, events: int, smoke: bool):
     material = write_material(folder.parent / f"{folder.name}.material.json", make_material_document(*STAND_IN_MATERIAL, name="the stand-in's silicone"))
-    quick = dict(num_rays=8, hold_range=(0.3, 0.8), gap_range=(0.2, 0.4), speed_range=(0.01, 0.02), force_range=(0.2, 4.0)) if smoke else {}
-    config = DatasetConfig(events=events, seed=9, **VARIATION, **quick)
+    config = DatasetConfig(events=events, seed=9, **VARIATION, **(SMOKE_REGIME if smoke else {}))
     generate_dataset("sphere8", folder, material=material, config=config, progress=not smoke)
     return load_dataset(folder)
 

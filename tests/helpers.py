@@ -38,6 +38,19 @@ def run_cli(*args, cwd=None):
     )
 
 
+def run_main(capsys, *args):
+    """`hydrotact ARGS` in this process (programs compiled here are reused); returns a
+    CompletedProcess as run_cli does, argparse's exit turned into the status."""
+    from hydrotact.cli import main
+
+    try:
+        code = main([str(arg) for arg in args])
+    except SystemExit as exit_:
+        code = exit_.code
+    captured = capsys.readouterr()
+    return subprocess.CompletedProcess(list(args), code, captured.out, captured.err)
+
+
 def assert_one_line_error(result, *fragments):
     """The CLI failed with exit 2 and one `hydrotact: error:` line naming `fragments`."""
     assert result.returncode == 2, (result.returncode, result.stdout, result.stderr)

@@ -13,7 +13,7 @@ import warnings
 
 import numpy as np
 import pytest
-from helpers import assert_one_line_error, run_cli
+from helpers import assert_one_line_error, run_cli, run_main
 from sysid_synthetic import make_lumped_log
 
 from hydrotact.cli import main
@@ -46,12 +46,8 @@ def lumped_parquet(lumped_log, tmp_path_factory):
 
 def _run(capsys, *args):
     """main(args) -> (exit status, stdout, stderr); argparse's exit becomes a status."""
-    try:
-        code = main([str(a) for a in args])
-    except SystemExit as exit_:
-        code = exit_.code
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
+    result = run_main(capsys, *args)
+    return result.returncode, result.stdout, result.stderr
 
 
 def _relative_taus(report):

@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import assert_one_line_error, run_cli
+from helpers import assert_one_line_error, run_cli, run_main
 
 from hydrotact import HydrotactError
 from hydrotact.datasets import load_dataset
@@ -367,16 +367,11 @@ def test_evaluate_predict_and_export_commands(tiny, trained, tmp_path, capsys):
     estimates equal the batched ones); `hydrotact export` writes the header; a missing
     model is one line. (In this process, as the tiny dataset is made: the programs are
     compiled already.)"""
-    from types import SimpleNamespace
-
-    from hydrotact.cli import main
     from hydrotact.data import BarometerLog, read_log, write_log
     from hydrotact.models import save_estimator
 
     def command(*args):
-        code = main([str(arg) for arg in args])
-        out, err = capsys.readouterr()
-        return SimpleNamespace(returncode=code, stdout=out, stderr=err)
+        return run_main(capsys, *args)
 
     model = save_estimator(trained, tmp_path / "model", "sphere8").parent
     (tmp_path / "copy").mkdir()

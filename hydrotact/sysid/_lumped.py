@@ -380,13 +380,14 @@ def _site_scan(layout: PressLayout, x, args, site, offsets):
     return jax.lax.map(shifted, offsets)
 
 
-def scan_site_onsets(layout: PressLayout, x, args, offsets=ONSET_SCAN):
+def scan_site_onsets(layout: PressLayout, x, args, cost=None, offsets=ONSET_SCAN):
     """One pass over the sites: each site's onsets moved together by the shift of
     `offsets` that lowers the solver's χ² most, the others held (the earlier sites
-    at their new shifts). Returns (x, its χ²); x unchanged where no shift lowers it.
+    at their new shifts). `cost` the solver's χ² at x, if known. Returns (x, its χ²);
+    x unchanged where no shift lowers it.
     The residuals are evaluated one shift at a time (lax.map: a long log's bases are
     not held 25 times over)."""
-    best = float(jnp.sum(press_residual_fn(layout)(x, args) ** 2))
+    best = float(jnp.sum(press_residual_fn(layout)(x, args) ** 2)) if cost is None else float(cost)
     num_sites = args[0][0].num_sites
     for site in range(num_sites):
         candidates, costs = _site_scan(layout, x, args, jnp.asarray(site), jnp.asarray(offsets, x.dtype))

@@ -129,23 +129,24 @@ def solve_press_scanned(layout: PressLayout, solver, max_steps: int, x0, args):
     more than ONSET_RESCAN_MIN_GAIN (times the χ² per residual, where above 1): a
     site's onsets and its law nearly trade, and the solver alone can end with every
     press at a site early by the same amount.
-    Returns (the solution, its outputs (:func:`_press_outputs`), its own χ²)."""
+    Returns (the solution, its outputs (:func:`_press_outputs`), (its own χ², the
+    solver's χ²))."""
     num_residuals = max(1, sum(int(jnp.sum(data.weights > 0.0)) for data in args[0]))
+    solver_chi_square = lambda x: float(jnp.sum(press_residual_fn(layout)(x, args) ** 2))
     solution = _solve_press(layout, solver, max_steps, x0, args)
     outputs = _press_outputs(layout, solution.value, args)
-    chi_square = _own_chi_square(outputs)
+    chi_square, cost = _own_chi_square(outputs), solver_chi_square(solution.value)
     for _ in range(ONSET_RESCANS):
-        current = float(jnp.sum(press_residual_fn(layout)(solution.value, args) ** 2))
-        x, cost = scan_site_onsets(layout, solution.value, args)
-        if not cost < current * (1.0 - 1e-6):
+        x, scanned = scan_site_onsets(layout, solution.value, args, cost)
+        if not scanned < cost * (1.0 - 1e-6):
             break
         rescanned = _solve_press(layout, solver, max_steps, x, args)
         rescanned_outputs = _press_outputs(layout, rescanned.value, args)
         rescanned_chi_square = _own_chi_square(rescanned_outputs)
         if not rescanned_chi_square < chi_square - ONSET_RESCAN_MIN_GAIN * max(1.0, chi_square / num_residuals):
             break
-        solution, outputs, chi_square = rescanned, rescanned_outputs, rescanned_chi_square
-    return solution, outputs, chi_square
+        solution, outputs, chi_square, cost = rescanned, rescanned_outputs, rescanned_chi_square, solver_chi_square(rescanned.value)
+    return solution, outputs, (chi_square, cost)
 
 
 def fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps, starts, num_used, num_linear):
@@ -162,10 +163,9 @@ def fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps, 
     candidates = SHAPE_STARTS if starts == "auto" else SHAPE_STARTS[:starts]
     for start in candidates if num_terms else candidates[:1]:  # no terms, no shape to start
         tried += 1
-        solution, outputs, chi_square = solve_press_scanned(layout, solver, max_steps, jnp.asarray(_initial_x(layout, logs, lag, start)), args)
-        if best is None or chi_square < best[3][0]:
-            solver_chi_square = float(jnp.sum(press_residual_fn(layout)(solution.value, args) ** 2))
-            best = (layout, args, solution, (chi_square, solver_chi_square), outputs)
+        solution, outputs, chi_squares = solve_press_scanned(layout, solver, max_steps, jnp.asarray(_initial_x(layout, logs, lag, start)), args)
+        if best is None or chi_squares[0] < best[3][0]:
+            best = (layout, args, solution, chi_squares, outputs)
         if starts == "auto" and best[3][0] / dof < RESTART_REDUCED_CHI2:
             break
     return *best, tried
