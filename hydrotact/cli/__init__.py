@@ -16,14 +16,10 @@ import warnings
 from .. import __version__
 from .._errors import HydrotactError, HydrotactWarning
 from .._files import cache_dir
-from . import compare, contact, demo, evaluate, export, field, fit, generate, mesh, predict, simulate, train
+from . import compare, contact, demo, design, evaluate, export, field, fit, generate, mesh, predict, simulate, train
 
-COMMANDS = (mesh, field, contact, simulate, fit, compare, generate, train, evaluate, predict, export, demo)
+COMMANDS = (mesh, field, contact, simulate, fit, compare, generate, train, evaluate, predict, export, design, demo)
 """The commands, in the order `hydrotact --help` lists them."""
-
-# Planned, its own module here once its library stage exists: design (barometer layouts).
-FUTURE_COMMANDS = ("design",)
-
 
 class Parser(argparse.ArgumentParser):
     """argparse, with one-line usage errors and negative numbers as values.

@@ -17,6 +17,7 @@ from ._config import PHASES as PHASES
 from ._config import DatasetConfig as DatasetConfig
 from ._events import EventPlan as EventPlan
 from ._events import Skin as Skin
+from ._events import calc_approach_thickness as calc_approach_thickness
 from ._events import draw_target_forces as draw_target_forces
 from ._events import find_touchable_skin as find_touchable_skin
 from ._events import pressing_rotation_vectors as pressing_rotation_vectors

@@ -15,6 +15,9 @@ from ._spec import (
     calc_sensor_surface as calc_sensor_surface,
 )
 from ._spec import (
+    document_text as document_text,
+)
+from ._spec import (
     known_parts as known_parts,
 )
 from ._spec import (

@@ -1,6 +1,9 @@
 """Pictures: pyvista renders and matplotlib plots. Never imported by the stages."""
 
 from ._dataset import plot_dataset as plot_dataset
+from ._design import plot_design_convergence as plot_design_convergence
+from ._design import plot_localisation_maps as plot_localisation_maps
+from ._design import render_layouts as render_layouts
 from ._estimator import plot_contact_detection as plot_contact_detection
 from ._estimator import plot_error_maps as plot_error_maps
 from ._fit import plot_fit as plot_fit

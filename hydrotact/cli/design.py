@@ -1,0 +1,97 @@
+"""`hydrotact design`: a barometer layout designed by gradient
+(hydrotact.design.design_layout), written as a sensor JSON that every other command
+reads, with its pictures and report."""
+
+from pathlib import Path
+
+from ._arguments import number
+from ._output import print_report
+
+
+def add_parser(subparsers):
+    from ..design import DesignConfig
+
+    d = DesignConfig.__dataclass_fields__
+    default = lambda name: d[name].default
+    parser = subparsers.add_parser(
+        "design", help="design where the barometers go and how they face, by gradient of the information their readings carry",
+        description="Maximises the information the barometers' readings carry about where a contact is and how hard it presses "
+        "(D-optimal, or the A-optimal Cramer-Rao bound on localisation), over contacts of the dataset regime, from several feasible "
+        "starts, under the constraints (inside the elastomer or on the board, a margin, a spacing, unit axes within a tilt). "
+        "Writes the designed sensor JSON, before/after renders, the convergence and a map of the predicted localisation error.",
+    )
+    parser.add_argument("--sensor", required=True, metavar="S", help="a built-in sensor (pad5x5, sphere8, ellipsoid8) or a sensor JSON file")
+    parser.add_argument("--barometers", type=int, metavar="N", help="how many barometers (default: as many as the sensor has)")
+    parser.add_argument("--objective", default=default("objective"), choices=["d", "a"], help="d: information volume (D-optimal, default); a: localisation bound (A-optimal)")
+    parser.add_argument("--placement", choices=["inside", "board"], help="ports inside the elastomer or on the board (default: where the sensor's are)")
+    parser.add_argument("--spacing", type=number, default=default("spacing"), metavar="M", help=f"least distance between ports, m (default {default('spacing'):g})")
+    parser.add_argument("--margin", type=number, default=default("margin"), metavar="M", help=f"least distance from a port to the elastomer's boundary, m (default {default('margin'):g})")
+    parser.add_argument("--max-tilt", type=number, default=default("max_tilt_deg"), metavar="DEG", help=f"largest tilt of an axis from +z (default {default('max_tilt_deg'):g})")
+    parser.add_argument("--field-sizes", action="store_true", help="design each receptive field's size too")
+    parser.add_argument("--material", type=Path, metavar="MATERIAL.json", help="the elastomer (its E(0) is used); default: elastic, --modulus")
+    parser.add_argument("--modulus", type=number, metavar="E", help="elastic modulus in Pa, without --material (default 1e7, the dataset generator's)")
+    parser.add_argument("--probe", metavar="SPEC", help="the indenter (default: the dataset regime's, sphere:r=3mm)")
+    parser.add_argument("--contacts", type=int, default=default("contacts"), metavar="N", help=f"contacts designed for, and as many held out (default {default('contacts')})")
+    parser.add_argument("--batch", type=int, default=default("batch"), metavar="N", help=f"contacts per optimiser step, a fresh draw from the pool each step (default {default('batch')})")
+    parser.add_argument("--rays", type=int, default=default("num_rays"), metavar="N", help=f"rays per receptive field (default {default('num_rays')})")
+    parser.add_argument("--noise", type=number, metavar="PA", help="barometer RMS noise in Pa (default: the part's)")
+    parser.add_argument("--relative-noise", type=number, default=default("relative_noise"), metavar="F", help=f"noise floor as a fraction of the reading (default {default('relative_noise'):g})")
+    parser.add_argument("--restarts", type=int, default=default("restarts"), metavar="K", help=f"random feasible starts besides the sensor's own (default {default('restarts')})")
+    parser.add_argument("--steps", type=int, default=default("steps"), metavar="N", help=f"optimiser steps per start (default {default('steps')})")
+    parser.add_argument("--seed", type=int, default=default("seed"), metavar="K", help=f"seed of every draw (default {default('seed')})")
+    parser.add_argument("-o", "--output", required=True, type=Path, metavar="LAYOUT.json", help="the designed sensor JSON (pictures and a report beside it)")
+    parser.add_argument("--no-plots", action="store_true", help="skip the pictures")
+    parser.add_argument("--json", action="store_true", help="print the report as JSON")
+    return parser
+
+
+def run(args) -> None:
+    import dataclasses
+    import json
+
+    from .._files import check_output, write_text_atomic
+    from ..datasets import DatasetConfig
+    from ..design import DesignConfig, design_layout
+    from ..sensors import document_text
+
+    output = check_output(args.output, suffixes=(".json",), what="the designed sensor")
+    config = DesignConfig(
+        objective=args.objective, contacts=args.contacts, batch=args.batch, num_rays=args.rays, relative_noise=args.relative_noise, noise_rms=args.noise,
+        placement=args.placement, margin=args.margin, spacing=args.spacing, max_tilt_deg=args.max_tilt, field_sizes=args.field_sizes,
+        restarts=args.restarts, steps=args.steps, seed=args.seed,
+    )
+    regime = DatasetConfig() if args.probe is None else DatasetConfig(probe=args.probe)
+    design = design_layout(args.sensor, args.barometers, config=config, regime=regime, material=args.material, modulus=args.modulus, progress=not args.json)
+    write_text_atomic(output, document_text(design.spec))
+    stem = output.with_suffix("")
+    scores = {"designed": design.designed} | ({"built-in": design.builtin} if design.builtin is not None else {})
+    report_document = {
+        "sensor": design.start_spec.name, "designed_sensor": str(output), "config": design.config.to_json(), "regime": design.regime.to_json(),
+        "scores": {name: {k: v for k, v in dataclasses.asdict(s).items() if k != "localisation_bounds"} for name, s in scores.items()},
+        "random_starts": [{k: v for k, v in dataclasses.asdict(s).items() if k != "localisation_bounds"} for s in design.random],
+        "elapsed_s": design.elapsed_s,
+    }
+    write_text_atomic(f"{stem}_report.json", json.dumps(report_document, indent=2) + "\n")
+    pictures = []
+    if not args.no_plots:
+        from ..viz import plot_design_convergence, plot_localisation_maps, render_layouts
+
+        before = "built-in" if design.builtin is not None else "start"
+        render_layouts(design.start_spec.make_mesh(check=False), {before: design.start_spec, "designed": design.spec}, f"{stem}_layouts.png")
+        plot_design_convergence(design.histories, design.start_names, f"{stem}_convergence.png", design.config.objective)
+        plot_localisation_maps(design.held_out_points_S, {name: s.localisation_bounds for name, s in reversed(scores.items())}, design.start_spec, f"{stem}_error_map.png")
+        pictures = [f"{stem}_layouts.png", f"{stem}_convergence.png", f"{stem}_error_map.png"]
+    best_random = max(design.random, key=lambda s: s.held_out_score) if design.random else None
+    report = {
+        "designed_sensor": str(output),
+        "barometers": design.spec.num_taxels,
+        "objective": "D-optimal (mean log det, higher is better)" if config.objective == "d" else "A-optimal (minus mean CRB, mm^2, higher is better)",
+        "designed_score": f"{design.designed.score:.5g} (held out {design.designed.held_out_score:.5g})",
+        "built_in_score": "n/a (other count)" if design.builtin is None else f"{design.builtin.score:.5g} (held out {design.builtin.held_out_score:.5g})",
+        "best_random_score": "none" if best_random is None else f"{best_random.score:.5g} (held out {best_random.held_out_score:.5g})",
+        "rms_localisation_bound_mm": f"{design.designed.rms_bound * 1e3:.3g}" + ("" if design.builtin is None else f" (built-in {design.builtin.rms_bound * 1e3:.3g})"),
+        "elapsed_s": design.elapsed_s,
+        "report": f"{stem}_report.json",
+        "pictures": ", ".join(pictures) or "none",
+    }
+    print_report(f"layout designed for {design.start_spec.name}", report, args.json)

@@ -1,0 +1,167 @@
+"""Layout design: the closest-point and feasibility geometry against independent
+checks, the information's gradients against finite differences and its change of
+variables against the determinant identity, the constraints after optimisation, the
+refusal of an impossible request, and the `hydrotact design` command end to end."""
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import assert_one_line_error, run_main
+
+from hydrotact._errors import HydrotactError
+from hydrotact.datasets import DatasetConfig
+from hydrotact.design import (
+    DesignObjective,
+    NoiseModel,
+    calc_closest_points,
+    calc_design_score,
+    calc_layout_information,
+    calc_prior_precision,
+    draw_design_contacts,
+    make_feasible_region,
+)
+from hydrotact.sensors import load_sensor
+from hydrotact.sensors._inside import calc_surface_distances
+from hydrotact.sim import make_sensor_model
+from hydrotact.taxel import TaxelCapacity
+
+jax.config.update("jax_enable_x64", True)
+
+# The smoke regime of the design: a coarse sphere (fewer contact polygons), 8 rays.
+REGIME = DatasetConfig(probe="sphere:r=3mm,subdivisions=1")
+
+
+@pytest.fixture(scope="module")
+def sphere8():
+    spec = load_sensor("sphere8")
+    return spec, spec.make_mesh(check=False)
+
+
+def test_closest_points_agree_with_the_distance_kernel_and_lie_on_their_triangles():
+    rng = np.random.default_rng(3)
+    triangles = rng.normal(size=(40, 3, 3))
+    points = 2.0 * rng.normal(size=(200, 3))
+    closest, distances, index = calc_closest_points(points, triangles)
+    np.testing.assert_allclose(distances, calc_surface_distances(points, triangles), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(closest - points, axis=1), distances, rtol=1e-12)
+    # On its triangle: barycentric coordinates in [0, 1] that rebuild the point.
+    a, b, c = (triangles[index, k] for k in range(3))
+    for k in range(len(points)):
+        w = np.linalg.lstsq(np.stack([b[k] - a[k], c[k] - a[k]], axis=1), closest[k] - a[k], rcond=None)[0]
+        assert w.min() > -1e-9 and w.sum() < 1.0 + 1e-9
+        np.testing.assert_allclose(a[k] + w[0] * (b[k] - a[k]) + w[1] * (c[k] - a[k]), closest[k], atol=1e-12)
+
+
+def test_the_projection_makes_any_layout_feasible_and_an_impossible_count_is_refused(sphere8):
+    _, mesh = sphere8
+    region = make_feasible_region(mesh, "inside", margin=1e-3, spacing=3e-3, max_tilt_deg=70.0)
+    rng = np.random.default_rng(0)
+    positions = rng.uniform([-15e-3, -15e-3, -5e-3], [15e-3, 15e-3, 20e-3], size=(8, 3))  # most outside
+    positions[1] = positions[0] + 1e-4  # two almost on top of each other
+    axes = rng.normal(size=(8, 3))
+    axes[2] = [0.0, 0.0, -1.0]  # straight into the board
+    assert region.violations(positions, axes)
+    projected, unit = region.project_positions(positions), region.project_axes(axes)
+    assert region.violations(projected, unit) == []
+    # The tilt bound is met exactly by the clipped axis; a feasible layout stays put.
+    np.testing.assert_allclose(unit[2, 2], np.cos(np.radians(70.0)))
+    np.testing.assert_array_equal(region.project_positions(projected), projected)
+    # Random feasible layouts are feasible; the board placement puts ports on z = 0.
+    assert region.violations(*region.random_layout(6, rng)) == []
+    board = make_feasible_region(mesh, "board", margin=1e-3, spacing=3e-3, max_tilt_deg=70.0)
+    ports, board_axes = board.random_layout(5, rng)
+    np.testing.assert_allclose(ports[:, 2], mesh.vertices[:, 2].min())
+    assert board.violations(ports, board_axes) == []
+    with pytest.raises(HydrotactError, match=r"cannot place 60 barometers 5 mm apart inside the elastomer .* room for \d+ at most"):
+        make_feasible_region(mesh, "inside", margin=1e-3, spacing=5e-3, max_tilt_deg=70.0).random_layout(60, rng)
+
+
+@pytest.fixture(scope="module")
+def linearised(sphere8):
+    spec, _ = sphere8
+    model = make_sensor_model(spec, num_rays=8)
+    contacts, area = draw_design_contacts(spec, model, REGIME, 1e7, 16, np.random.default_rng(1))
+    noise = NoiseModel(jnp.asarray(0.03), jnp.asarray(0.016), jnp.asarray(0.05), jnp.asarray(23675.0))
+    return model, contacts, noise, calc_prior_precision(area, contacts.forces)
+
+
+def test_contacts_reach_their_forces_and_the_information_changes_variables_exactly(linearised):
+    model, contacts, noise, prior = linearised
+    forces = np.asarray(contacts.forces)
+    assert np.all(forces > 0.0) and np.all(np.asarray(contacts.depths) > 0.0)
+    # The force Jacobian's depth entry is the slope the secant search used: positive.
+    assert np.all(np.asarray(contacts.force_jacobians)[:, 2] > 0.0)
+    information = calc_layout_information(model.layout, contacts, noise, 8, TaxelCapacity(16384, 16384))
+    assert not bool(np.any(information.did_overflow))
+    # Without the prior, det I(u, v, F) = det I(u, v, d) / (dF/dd)^2 (A = dθ/dq has
+    # det dF/dd): recompute I(u, v, d) by hand from the same readings' Jacobian.
+    info = np.asarray(information.information)
+    f_q = np.asarray(contacts.force_jacobians)
+    a = np.zeros((len(f_q), 3, 3))
+    a[:, 0, 0] = a[:, 1, 1] = 1.0
+    a[:, 2] = f_q
+    info_q = np.einsum("nki,nkl,nlj->nij", a, info, a)  # I_q = Aᵀ I_θ A
+    seen = np.linalg.matrix_rank(info_q, tol=1e-6 * np.abs(info_q).max()) == 3
+    assert seen.any()
+    np.testing.assert_allclose(
+        np.linalg.slogdet(info[seen])[1], np.linalg.slogdet(info_q[seen])[1] - 2.0 * np.log(f_q[seen, 2]), rtol=1e-9
+    )
+
+
+def test_the_objective_gradients_match_finite_differences(linearised):
+    model, contacts, noise, prior = linearised
+    contacts = jax.tree_util.tree_map(lambda a: a[:4] if np.ndim(a) else a, contacts)  # four contacts: one compilation, small
+    capacity = TaxelCapacity(16384, 16384)
+
+    def scores(positions, axes):
+        layout = model.layout.__class__(positions, axes, model.layout.field_sizes, model.layout.is_cone)
+        information = calc_layout_information(layout, contacts, noise, 8, capacity).information
+        return jnp.stack([calc_design_score(information, prior, DesignObjective(name)) for name in ("d", "a")])
+
+    jacobian = jax.jit(jax.jacrev(scores, argnums=(0, 1)))
+    value = jax.jit(scores)
+    positions, axes = model.layout.positions_S, model.layout.axes_S
+    j_positions, j_axes = (np.asarray(j) for j in jacobian(positions, axes))  # (2, taxels, 3) each
+    assert np.any(j_positions != 0.0) and np.any(j_axes != 0.0)
+    checked = 0
+    for taxel, k in [(0, 2), (1, 0), (3, 1), (6, 2)]:
+        for which, (array, gradient, h) in enumerate(((positions, j_positions, 1e-6), (axes, j_axes, 1e-5))):
+            step = jnp.zeros_like(array).at[taxel, k].set(h)
+            plus = value(positions + step, axes) if which == 0 else value(positions, axes + step)
+            minus = value(positions - step, axes) if which == 0 else value(positions, axes - step)
+            fd = np.asarray(plus - minus) / (2 * h)
+            for objective in range(2):
+                ad = float(gradient[objective, taxel, k])
+                scale = max(abs(ad), 1e-3 * float(np.abs(gradient[objective]).max()))
+                assert abs(fd[objective] - ad) <= 2e-3 * scale, ("da"[objective], taxel, k, fd[objective], ad)
+                checked += abs(ad) > 0.0
+    assert checked >= 8
+
+
+def test_design_command_writes_a_feasible_sensor_that_beats_the_built_in(tmp_path, capsys, sphere8):
+    out = tmp_path / "designed" / "sphere8_layout.json"
+    args = ["design", "--sensor", "sphere8", "--probe", REGIME.probe, "--contacts", 8, "--rays", 8, "--restarts", 1, "--steps", 6, "--spacing", "2.5e-3", "-o", out]
+    result = run_main(capsys, *args, "--json")
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    document = json.loads((tmp_path / "designed" / "sphere8_layout_report.json").read_text())
+    designed, builtin = document["scores"]["designed"], document["scores"]["built-in"]
+    assert designed["score"] > builtin["score"]
+    for name in ("layouts", "convergence", "error_map"):
+        assert (tmp_path / "designed" / f"sphere8_layout_{name}.png").stat().st_size > 10_000
+    assert report["barometers"] == 8
+    # The written sensor is a sensor every command reads; its layout keeps the constraints
+    # (checked by the mesh's own point location).
+    spec = load_sensor(out)
+    _, mesh = sphere8
+    region = make_feasible_region(mesh, "inside", margin=1e-3, spacing=2.5e-3, max_tilt_deg=75.0)
+    assert region.violations(spec.taxel_positions_S, spec.taxel_axes_S) == []
+    assert not np.allclose(spec.taxel_positions_S, sphere8[0].taxel_positions_S)
+    # Impossible requests: one line each, nothing written.
+    crowded = run_main(capsys, "design", "--sensor", "sphere8", "--barometers", 80, "--spacing", "5e-3", "-o", tmp_path / "crowded.json")
+    assert_one_line_error(crowded, "cannot place 80 barometers", "room for")
+    assert not (tmp_path / "crowded.json").exists()
+    assert_one_line_error(run_main(capsys, "design", "--sensor", "sphere8", "--steps", -1, "-o", tmp_path / "x.json"), "--steps")
