@@ -84,7 +84,7 @@ def linearised(sphere8):
     spec, _ = sphere8
     model = make_sensor_model(spec, num_rays=8)
     contacts, area = draw_design_contacts(spec, model, REGIME, 1e7, 16, np.random.default_rng(1))
-    noise = NoiseModel(jnp.asarray(0.03), jnp.asarray(0.016), jnp.asarray(0.05), jnp.asarray(23675.0))
+    noise = NoiseModel(jnp.asarray(0.03), jnp.asarray(0.016), jnp.asarray(20.0), jnp.asarray(0.05), jnp.asarray(23675.0))
     return model, contacts, noise, calc_prior_precision(area, contacts.forces)
 
 
@@ -141,10 +141,10 @@ def test_the_objective_gradients_match_finite_differences(linearised):
     assert checked >= 8
 
 
-def test_design_command_writes_a_feasible_sensor_that_beats_the_built_in(tmp_path, capsys, sphere8):
+def test_design_command_writes_a_feasible_sensor_that_beats_the_built_in_and_resumes(tmp_path, capsys, sphere8, monkeypatch):
     out = tmp_path / "designed" / "sphere8_layout.json"
-    args = ["design", "--sensor", "sphere8", "--probe", REGIME.probe, "--contacts", 8, "--rays", 8, "--restarts", 1, "--steps", 6, "--spacing", "2.5e-3", "-o", out]
-    result = run_main(capsys, *args, "--json")
+    args = ["design", "--sensor", "sphere8", "--probe", REGIME.probe, "--contacts", 8, "--rays", 8, "--restarts", 1, "--steps", 6, "--spacing", "2.5e-3"]
+    result = run_main(capsys, *args, "-o", out, "--json")
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)
     document = json.loads((tmp_path / "designed" / "sphere8_layout_report.json").read_text())
@@ -160,6 +160,28 @@ def test_design_command_writes_a_feasible_sensor_that_beats_the_built_in(tmp_pat
     region = make_feasible_region(mesh, "inside", margin=1e-3, spacing=2.5e-3, max_tilt_deg=75.0)
     assert region.violations(spec.taxel_positions_S, spec.taxel_axes_S) == []
     assert not np.allclose(spec.taxel_positions_S, sphere8[0].taxel_positions_S)
+    assert not (tmp_path / "designed" / "sphere8_layout.json.partial").exists()
+    # Killed during the second start, then started again: the first start is read
+    # back, not climbed again, and the layout is the uninterrupted run's.
+    from hydrotact.design import _design
+
+    climb, calls = _design._climb, []
+
+    def killed(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return climb(*args, **kwargs)
+
+    monkeypatch.setattr(_design, "_climb", killed)
+    again = tmp_path / "again.json"
+    assert run_main(capsys, *args, "-o", again, "--no-plots").returncode == 130
+    assert (tmp_path / "again.json.partial" / "start-00.npz").is_file() and not again.exists()
+    calls.clear()
+    monkeypatch.setattr(_design, "_climb", lambda *a, **k: calls.append(1) or climb(*a, **k))
+    assert run_main(capsys, *args, "-o", again, "--no-plots").returncode == 0
+    assert len(calls) == 1
+    np.testing.assert_array_equal(load_sensor(again).taxel_positions_S, spec.taxel_positions_S)
     # Impossible requests: one line each, nothing written.
     crowded = run_main(capsys, "design", "--sensor", "sphere8", "--barometers", 80, "--spacing", "5e-3", "-o", tmp_path / "crowded.json")
     assert_one_line_error(crowded, "cannot place 80 barometers", "room for")

@@ -1,6 +1,9 @@
 """`hydrotact design`: a barometer layout designed by gradient
 (hydrotact.design.design_layout), written as a sensor JSON that every other command
-reads, with its pictures and report."""
+reads, with its pictures and report.
+
+Interrupted runs resume: each finished start is kept in `LAYOUT.json.partial/`, and the
+same command started again picks up after the last one (the folder goes on success)."""
 
 from pathlib import Path
 
@@ -35,6 +38,9 @@ def add_parser(subparsers):
     parser.add_argument("--batch", type=int, default=default("batch"), metavar="N", help=f"contacts per optimiser step, a fresh draw from the pool each step (default {default('batch')})")
     parser.add_argument("--rays", type=int, default=default("num_rays"), metavar="N", help=f"rays per receptive field (default {default('num_rays')})")
     parser.add_argument("--noise", type=number, metavar="PA", help="barometer RMS noise in Pa (default: the part's)")
+    parser.add_argument(
+        "--noise-floor", type=number, default=default("noise_floor"), metavar="PA",
+        help=f"a cast barometer's drift, creep and hysteresis as noise, Pa (default {default('noise_floor'):g})")
     parser.add_argument("--relative-noise", type=number, default=default("relative_noise"), metavar="F", help=f"noise floor as a fraction of the reading (default {default('relative_noise'):g})")
     parser.add_argument("--restarts", type=int, default=default("restarts"), metavar="K", help=f"random feasible starts besides the sensor's own (default {default('restarts')})")
     parser.add_argument("--steps", type=int, default=default("steps"), metavar="N", help=f"optimiser steps per start (default {default('steps')})")
@@ -48,6 +54,7 @@ def add_parser(subparsers):
 def run(args) -> None:
     import dataclasses
     import json
+    import shutil
 
     from .._files import check_output, write_text_atomic
     from ..datasets import DatasetConfig
@@ -56,12 +63,15 @@ def run(args) -> None:
 
     output = check_output(args.output, suffixes=(".json",), what="the designed sensor")
     config = DesignConfig(
-        objective=args.objective, contacts=args.contacts, batch=args.batch, num_rays=args.rays, relative_noise=args.relative_noise, noise_rms=args.noise,
+        objective=args.objective, contacts=args.contacts, batch=args.batch, num_rays=args.rays, relative_noise=args.relative_noise, noise_floor=args.noise_floor, noise_rms=args.noise,
         placement=args.placement, margin=args.margin, spacing=args.spacing, max_tilt_deg=args.max_tilt, field_sizes=args.field_sizes,
         restarts=args.restarts, steps=args.steps, seed=args.seed,
     )
     regime = DatasetConfig() if args.probe is None else DatasetConfig(probe=args.probe)
-    design = design_layout(args.sensor, args.barometers, config=config, regime=regime, material=args.material, modulus=args.modulus, progress=not args.json)
+    partial = output.with_name(output.name + ".partial")
+    design = design_layout(
+        args.sensor, args.barometers, config=config, regime=regime, material=args.material, modulus=args.modulus, checkpoint=partial, progress=not args.json
+    )
     write_text_atomic(output, document_text(design.spec))
     stem = output.with_suffix("")
     scores = {"designed": design.designed} | ({"built-in": design.builtin} if design.builtin is not None else {})
@@ -94,4 +104,5 @@ def run(args) -> None:
         "report": f"{stem}_report.json",
         "pictures": ", ".join(pictures) or "none",
     }
+    shutil.rmtree(partial, ignore_errors=True)
     print_report(f"layout designed for {design.start_spec.name}", report, args.json)

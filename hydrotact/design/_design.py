@@ -19,6 +19,7 @@ import numpy as np
 
 from .._buffers import run_growing
 from .._errors import HydrotactError
+from .._files import atomic_path
 from ..taxel import TaxelCapacity, make_taxel_layout
 from ._feasible import FeasibleRegion, Placement, make_feasible_region
 from ._objective import DesignObjective, NoiseModel, calc_design_score, calc_layout_information, calc_localisation_bounds, calc_prior_precision
@@ -47,9 +48,11 @@ class DesignConfig:
     contacts fits them, not the skin: measured on sphere8 with 24, the designed layout
     gained 4.4 on its contacts and lost 2.2 against the built-in on held-out ones) and
     as many again held out;
-    `num_rays` per receptive field; `relative_noise` the noise floor proportional to a
-    reading (an estimator knows a cast barometer's gain to a few per cent) and
-    `noise_rms` (Pa, None: the part's).
+    `num_rays` per receptive field; the noise (:class:`NoiseModel`): `noise_rms` (Pa,
+    None: the part's), `noise_floor` (Pa) for a cast barometer's drift, creep and
+    hysteresis (our choice, not measured on real logs) and `relative_noise` the part
+    proportional to a reading (an estimator knows a cast barometer's gain to a few per
+    cent).
 
     **Constraints:** `placement` "inside" or "board" (None: where the sensor's own
     ports are), `margin` and `spacing` (m), `max_tilt_deg` of an axis from +z;
@@ -57,9 +60,9 @@ class DesignConfig:
 
     **Search:** `restarts` random feasible starts (besides the sensor's own layout),
     `steps` of Adam each, moving a port by up to `learning_rate` mm per step and an
-    axis (or a cone's half-angle) by `axis_learning_rate` rad (the score is far more
-    sensitive to a barometer's direction than to its place: measured on sphere8, a
-    step of 0.03 rad on every axis already lost what 0.3 mm on every port gained),
+    axis (or a cone's half-angle) by `axis_learning_rate` rad (the score is more
+    sensitive to a barometer's direction than to its place: on sphere8 a step of
+    0.03 rad on every axis moves it about as much as 0.3 mm on every port),
     both decaying to a tenth along a cosine; stopping early after `patience` steps
     without a gain; `seed` of every draw.
     """
@@ -70,6 +73,7 @@ class DesignConfig:
     eval_every: int = 10
     num_rays: int = 32
     relative_noise: float = 0.05
+    noise_floor: float = 20.0
     noise_rms: float | None = None
     placement: str | None = None
     margin: float = 1e-3
@@ -79,7 +83,7 @@ class DesignConfig:
     restarts: int = 3
     steps: int = 120
     learning_rate: float = 0.2
-    axis_learning_rate: float = 0.01
+    axis_learning_rate: float = 0.02
     patience: int = 25
     seed: int = 0
 
@@ -91,7 +95,7 @@ class DesignConfig:
             value = getattr(self, name)
             if not isinstance(value, int | np.integer) or isinstance(value, bool) or value < low:
                 raise HydrotactError(f"--{name.replace('_', '-')}: must be a whole number of at least {low}, got {value!r}")
-        for name in ("relative_noise", "learning_rate", "axis_learning_rate"):
+        for name in ("relative_noise", "noise_floor", "learning_rate", "axis_learning_rate"):
             value = float(getattr(self, name))
             rate = name.endswith("learning_rate")
             if not np.isfinite(value) or value < 0.0 or (rate and value == 0.0):
@@ -274,7 +278,10 @@ def _climb(region: FeasibleRegion, scorer, pool_score, template, positions, axes
     return positions_mm * POSITION_UNIT, axes / np.linalg.norm(axes, axis=1, keepdims=True), sizes * units, np.asarray(history), capacity
 
 
-def design_layout(sensor, num_barometers: int | None = None, *, config: DesignConfig | None = None, regime=None, material=None, modulus=None, progress: bool = False) -> LayoutDesign:
+def design_layout(
+    sensor, num_barometers: int | None = None, *, config: DesignConfig | None = None, regime=None, material=None, modulus=None,
+    checkpoint=None, progress: bool = False,
+) -> LayoutDesign:
     """Design the layout of `num_barometers` barometers (default: as many as the
     sensor has) for a sensor (a SensorSpec, a built-in name or a spec file), its
     elastomer and barometer part (host).
@@ -286,6 +293,10 @@ def design_layout(sensor, num_barometers: int | None = None, *, config: DesignCo
       (probe, force distribution and range, deepest press); the paper's by default.
     - `material`, `modulus`: the elastomer, a material document or file, or an elastic
       modulus (Pa; default 10 MPa, the dataset generator's); its E(0) is used.
+    - `checkpoint`: a folder where each finished start is kept (`start-K.npz`, with
+      the request's digest in `state.json`): a run killed and started again with the
+      same request resumes after its last finished start (None: nothing kept). The
+      caller removes it after success.
     - `progress`: a progress bar over the steps.
 
     **Returns:** a :class:`LayoutDesign`. An infeasible request (more barometers than
@@ -313,6 +324,8 @@ def design_layout(sensor, num_barometers: int | None = None, *, config: DesignCo
     starts = [region.random_layout(count, rng) for _ in range(config.restarts)]  # refuses an impossible count first
     modulus_pa = _modulus(material, modulus, DEFAULT_DATASET_MODULUS)
 
+    if checkpoint is not None:
+        checkpoint = _start_checkpoint(checkpoint, {"sensor": spec.to_json(), "count": int(count), "config": config.to_json(), "regime": regime.to_json(), "modulus": modulus_pa})
     model = make_sensor_model(spec, num_rays=config.num_rays)
     # One draw of twice the contacts (one compilation), halved: the design's and the held-out.
     both, skin_area = draw_design_contacts(spec, model, regime, modulus_pa, 2 * config.contacts, rng)
@@ -322,6 +335,7 @@ def design_layout(sensor, num_barometers: int | None = None, *, config: DesignCo
     noise = NoiseModel(
         noise_rms=jnp.asarray(float(part.noise_rms_pa if config.noise_rms is None else config.noise_rms)),
         lsb=jnp.asarray(float(part.lsb_pa)),
+        floor=jnp.asarray(float(config.noise_floor)),
         relative_noise=jnp.asarray(float(config.relative_noise)),
         limit=jnp.asarray(float(part.range_pa[1] - part.ambient_pa)),
     )
@@ -369,9 +383,18 @@ def design_layout(sensor, num_barometers: int | None = None, *, config: DesignCo
                     bar.set_postfix_str(f"score {value:.5g}", refresh=False)
 
             before = bar.n
-            best_positions, best_axes, best_sizes, history, capacity = _climb(
-                region, scorer, pool_score, template, positions, axes, sizes, config, capacity, rng, on_step
-            )
+            kept = None if checkpoint is None else checkpoint / f"start-{len(results):02d}.npz"
+            if kept is not None and kept.is_file():
+                with np.load(kept) as saved:
+                    best_positions, best_axes, best_sizes, history = (saved[k] for k in ("positions", "axes", "sizes", "history"))
+            else:
+                start_rng = np.random.default_rng([config.seed, len(results)])  # the same minibatches whether resumed or not
+                best_positions, best_axes, best_sizes, history, capacity = _climb(
+                    region, scorer, pool_score, template, positions, axes, sizes, config, capacity, start_rng, on_step
+                )
+                if kept is not None:
+                    with atomic_path(kept, suffix=".npz") as tmp:
+                        np.savez(tmp, positions=best_positions, axes=best_axes, sizes=best_sizes, history=history)
             results.append((float(history[:, 1].max()), best_positions, best_axes, best_sizes))
             histories.append(history)
             bar.update(config.steps + 1 - (bar.n - before))
@@ -387,6 +410,28 @@ def design_layout(sensor, num_barometers: int | None = None, *, config: DesignCo
         histories=histories, start_names=[name for name, _, _ in named], held_out_points_S=np.asarray(held_out.points_S),
         elapsed_s=time.perf_counter() - started,
     )
+
+
+def _start_checkpoint(folder, request: dict):
+    """The checkpoint folder for `request`: made if absent; a folder of another request
+    (its `state.json` digest differs) has its kept starts removed first."""
+    import json
+    from pathlib import Path
+
+    from .._files import digest, write_text_atomic
+
+    folder = Path(folder)
+    key = digest(json.dumps(request, sort_keys=True))
+    state = folder / "state.json"
+    try:
+        same = json.loads(state.read_text())["request_digest"] == key
+    except (OSError, ValueError, KeyError, TypeError):
+        same = False
+    if not same:
+        for kept in folder.glob("start-*.npz"):
+            kept.unlink()
+        write_text_atomic(state, json.dumps({"request_digest": key, "request": request}, indent=2) + "\n")
+    return folder
 
 
 def _modulus(material, modulus, default: float) -> float:
