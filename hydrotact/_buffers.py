@@ -73,6 +73,11 @@ class AbstractCapacity(eqx.Module):
         """Each buffer's size, in field order."""
         return tuple(getattr(self, field.name) for field in dataclasses.fields(self))
 
+    def rounded_up(self) -> Self:
+        """Every buffer rounded up to a power of two (host): few distinct capacities,
+        so few compilations of the kernels they size."""
+        return type(self)(*(1 << (int(size) - 1).bit_length() for size in self.sizes))
+
     def grown_to(self, needed) -> Self:
         """The capacity to retry with after an overflow (host).
 

@@ -67,7 +67,7 @@ def _kernel(capacity: SimCapacity):
 def _rounded(capacity: SimCapacity) -> SimCapacity:
     """Every buffer rounded up to a power of two: few distinct capacities, so few
     compilations (each new one compiles the kernels again, ~20 s on a laptop CPU)."""
-    return SimCapacity(*(1 << (int(size) - 1).bit_length() for size in capacity.sizes))
+    return capacity.rounded_up()
 
 
 def _next_capacity(capacity: SimCapacity, needed: np.ndarray) -> SimCapacity:

@@ -107,12 +107,6 @@ def _force_kernel(model, probe, capacity, depths, points, directions, rotations)
     return jax.lax.map(lambda args: _force(model, probe, capacity, *args), (depths, points, directions, rotations), batch_size=8)
 
 
-def _rounded(capacity: Capacity) -> Capacity:
-    """Every buffer rounded up to a power of two: few distinct capacities, so few
-    compilations (the linearised contact compiles in about a minute on a laptop CPU)."""
-    return Capacity(*(1 << (int(size) - 1).bit_length() for size in capacity.sizes))
-
-
 @eqx.filter_jit
 def _linear_kernel(model, probe, capacity, depths, points, directions, rotations):
     return jax.lax.map(lambda args: _linearise(model, probe, capacity, *args), (depths, points, directions, rotations), batch_size=8)
@@ -136,7 +130,7 @@ def linearise_contacts(model, probe, modulus: float, points_S, normals_S, target
     def grown(kernel, depths):
         nonlocal capacity
         result, fitted = run_growing(lambda c: kernel(model, probe, c, jnp.asarray(depths), points, directions, rotations), capacity)
-        capacity = _rounded(fitted)
+        capacity = fitted.rounded_up()  # the linearised contact compiles in about a minute on a laptop CPU
         return result
 
     def log_force_gap(x):

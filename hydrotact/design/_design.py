@@ -220,7 +220,7 @@ def _make_scorer(contacts, noise, prior, objective, num_rays):
 def _grown(compute, capacity):
     """run_growing with the capacity kept at powers of two (few compilations)."""
     result, fitted = run_growing(compute, capacity)
-    return result, type(fitted)(*(1 << (int(size) - 1).bit_length() for size in fitted.sizes))
+    return result, fitted.rounded_up()
 
 
 def _score_layout(layout, contacts, noise, prior, objective, num_rays, capacity):
