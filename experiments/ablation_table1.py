@@ -165,12 +165,19 @@ def _table(runs: list) -> list:
     table = []
     for (sensor, label, binned), members in rows.items():
         entry = {"sensor": sensor, "row": label, "binned": binned, "parameters": members[0]["parameters"], "seeds": len(members)}
-        for name in METRICS:
-            values = [m["metrics"][name] for m in members if name in m["metrics"]]
-            if values:
-                entry[name] = {"mean": float(np.mean(values)), "std": float(np.std(values))}
-        table.append(entry)
+        table.append(entry | summarise_metrics(members, METRICS))
     return table
+
+
+def summarise_metrics(runs: list, names) -> dict:
+    """{metric: {"mean", "std"}} over `runs` (the seeds of one row), for each of
+    `names` that the runs report."""
+    summary = {}
+    for name in names:
+        values = [run["metrics"][name] for run in runs if name in run["metrics"]]
+        if values:
+            summary[name] = {"mean": float(np.mean(values)), "std": float(np.std(values))}
+    return summary
 
 
 def _markdown(table: list, ageing) -> str:

@@ -165,11 +165,15 @@ def test_overflow_is_detected_and_retried():
     X = make_pose([0.0, 0.0, 3.5e-3])
     # Each soft-rigid buffer reports its own overflow: the candidate pairs (boxes
     # overlap), then, once those fit, the polygons (the pairs the plane tests keep).
-    small = calc_soft_rigid_surface(field, probe, X, Capacity(64, 64, 128, 128))
+    # The second call runs at the capacity the retry loop grows to next, so the loop
+    # below compiles one new capacity, not three.
+    small = calc_soft_rigid_surface(field, probe, X, first := Capacity(64, 64, 128, 128))
     assert bool(small.did_overflow) and int(small.needed[2]) > 128
-    small = calc_soft_rigid_surface(field, probe, X, Capacity(64, 64, 8192, 128))
-    assert bool(small.did_overflow) and int(small.needed[3]) > 128 and int(small.needed[2]) <= 8192
-    surface, capacity = compute_contact_surface(field, probe, X, Capacity(64, 64, 128, 128))
+    grown = first.grown_to(small.needed)
+    assert grown.pairs >= int(small.needed[2]) and grown.polygons == 128
+    small = calc_soft_rigid_surface(field, probe, X, grown)
+    assert bool(small.did_overflow) and int(small.needed[3]) > 128 and int(small.needed[2]) <= grown.pairs
+    surface, capacity = compute_contact_surface(field, probe, X, first)
     assert not bool(surface.did_overflow) and capacity.pairs > 128 and capacity.polygons > 128
     # The half-space's two buffers (tets by cluster, then polygons) grow as well.
     X_half = make_pose([0.0, 0.0, 3.5e-3])

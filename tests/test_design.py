@@ -77,6 +77,11 @@ def test_the_projection_makes_any_layout_feasible_and_an_impossible_count_is_ref
     assert board.violations(ports, board_axes) == []
     with pytest.raises(HydrotactError, match=r"cannot place 60 barometers 5 mm apart inside the elastomer .* room for \d+ at most"):
         make_feasible_region(mesh, "inside", margin=1e-3, spacing=5e-3, max_tilt_deg=70.0).random_layout(60, rng)
+    # A baseline layout to compare must keep the design's constraints: refused before any work.
+    from hydrotact.design import DesignConfig, design_layout
+
+    with pytest.raises(HydrotactError, match=r"compare\['hand-made'\]: the layout breaks the design's constraints: barometer \d+"):
+        design_layout(sphere8[0], config=DesignConfig(contacts=8, restarts=1, steps=1), compare={"hand-made": (positions, unit)})
 
 
 @pytest.fixture(scope="module")

@@ -137,3 +137,28 @@ def test_bad_material_and_trajectory_are_refused():
         make_trajectory([0.0, 0.01], [[0, 0, 0], [np.nan, 0, 0]])
     with pytest.raises(HydrotactError, match="unknown field kind"):
         make_sensor_model("pad5x5", field_kind="elastic")
+
+
+def test_a_renamed_sensor_or_moved_barometers_compile_nothing_again(pad_model):
+    """The model a kernel takes holds no name, and its layout is data: the same
+    geometry under another name or with its barometers elsewhere has the same pytree
+    structure and shapes, so every jitted stage reuses its programs."""
+    import dataclasses
+
+    from hydrotact.sensors import load_sensor
+
+    spec = load_sensor("pad5x5")
+    moved = dataclasses.replace(spec, name="pad5x5_moved", taxel_positions_S=spec.taxel_positions_S + np.array([2e-4, 0.0, 0.0]))
+    other = make_sensor_model(load_sensor(moved.to_json()), num_rays=pad_model.num_rays)
+    assert jax.tree_util.tree_structure(other) == jax.tree_util.tree_structure(pad_model)
+    assert [np.shape(a) for a in jax.tree_util.tree_leaves(other)] == [np.shape(a) for a in jax.tree_util.tree_leaves(pad_model)]
+    assert not np.allclose(np.asarray(other.layout.positions_S), np.asarray(pad_model.layout.positions_S))
+    traces = []
+
+    @eqx.filter_jit
+    def kernel(model):
+        traces.append(model)  # runs once per trace
+        return model.layout.positions_S.sum()
+
+    assert float(kernel(pad_model)) != float(kernel(other))
+    assert len(traces) == 1

@@ -126,9 +126,11 @@ class LayoutDesign:
     **Fields:** `spec` the sensor with the designed layout; `start_spec` the sensor as
     given; `config`, `regime` (the DatasetConfig the contacts follow); `designed`,
     `builtin` (None when the counts differ) and `random` (the random starts, before
-    optimisation) :class:`LayoutScore`\\ s; `histories` the pool's score as (step,
-    score) rows for each start (`start_names` name them); `held_out_points_S` (N, 3) the held-out
-    contacts' skin points (for maps); `elapsed_s`.
+    optimisation) :class:`LayoutScore`\\ s; `compared` the scores of the layouts passed
+    as `compare`, by name; `histories` the pool's score as (step, score) rows for each
+    start (`start_names` name them, `start_layouts` gives each start's (positions,
+    axes)); `held_out_points_S` (N, 3) the held-out contacts' skin points (for maps);
+    `elapsed_s`.
     """
 
     spec: object
@@ -140,6 +142,8 @@ class LayoutDesign:
     random: list
     histories: list
     start_names: list
+    start_layouts: list
+    compared: dict
     held_out_points_S: np.ndarray
     elapsed_s: float
 
@@ -280,7 +284,7 @@ def _climb(region: FeasibleRegion, scorer, pool_score, template, positions, axes
 
 def design_layout(
     sensor, num_barometers: int | None = None, *, config: DesignConfig | None = None, regime=None, material=None, modulus=None,
-    checkpoint=None, progress: bool = False,
+    compare: dict | None = None, checkpoint=None, progress: bool = False,
 ) -> LayoutDesign:
     """Design the layout of `num_barometers` barometers (default: as many as the
     sensor has) for a sensor (a SensorSpec, a built-in name or a spec file), its
@@ -322,6 +326,13 @@ def design_layout(
     region = make_feasible_region(mesh, placement, config.margin, config.spacing, config.max_tilt_deg)
     rng = np.random.default_rng(config.seed)
     starts = [region.random_layout(count, rng) for _ in range(config.restarts)]  # refuses an impossible count first
+    compare = {name: (np.asarray(p, dtype=np.float64), np.asarray(a, dtype=np.float64)) for name, (p, a) in (compare or {}).items()}
+    for name, (positions, axes) in compare.items():
+        if positions.shape != (count, 3) or axes.shape != (count, 3):
+            raise HydrotactError(f"compare[{name!r}]: needs ({count}, 3) positions and axes, got {positions.shape} and {axes.shape}")
+        problems = region.violations(positions, axes)
+        if problems:
+            raise HydrotactError(f"compare[{name!r}]: the layout breaks the design's constraints: {problems[0]}")
     modulus_pa = _modulus(material, modulus, DEFAULT_DATASET_MODULUS)
 
     if checkpoint is not None:
@@ -363,6 +374,9 @@ def design_layout(
     for _, positions, axes in named[1 if builtin is not None else 0 :]:
         scored, capacity = score(positions, axes, sizes, capacity)
         random_scores.append(scored)
+    compared = {}
+    for name, (positions, axes) in compare.items():
+        compared[name], capacity = score(positions, axes, sizes, capacity)
 
     scorer = _make_scorer(contacts, noise, prior, objective, config.num_rays)
 
@@ -407,7 +421,8 @@ def design_layout(
     designed_spec = _with_layout(spec, positions, axes, kinds, sizes_best, config, objective)
     return LayoutDesign(
         spec=designed_spec, start_spec=spec, config=config, regime=regime, designed=designed, builtin=builtin, random=random_scores,
-        histories=histories, start_names=[name for name, _, _ in named], held_out_points_S=np.asarray(held_out.points_S),
+        histories=histories, start_names=[name for name, _, _ in named], start_layouts=[(positions, axes) for _, positions, axes in named],
+        compared=compared, held_out_points_S=np.asarray(held_out.points_S),
         elapsed_s=time.perf_counter() - started,
     )
 

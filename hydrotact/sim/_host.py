@@ -175,7 +175,7 @@ def compute_pose_responses(model: SensorModel, probe, pose_rows, *, progress: bo
     blocks = [] if checkpoint is None else _load_blocks(checkpoint, key)
     done = sum(len(block["area"]) for block in blocks)  # not len(blocks) * BLOCK: they may have been saved with another BLOCK
     count = len(rows)
-    with tqdm(total=count, initial=min(count, done), unit="pose", desc=f"simulating {model.name} ({count} distinct poses)", disable=not progress) as bar:
+    with tqdm(total=count, initial=min(count, done), unit="pose", desc=f"simulating {count} distinct poses", disable=not progress) as bar:
         if done < count:  # the first chunk compiles the contact and ray kernels: say so, not a frozen 0 %
             bar.set_postfix_str("compiling the contact kernels (once per sensor and probe)", refresh=True)
 

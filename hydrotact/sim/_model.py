@@ -27,9 +27,12 @@ class SensorModel(eqx.Module):
     e): every force and taxel pressure it gives is the response per pascal of E, and
     the material scales it (the elastic response is linear in E).
 
+    It holds no name: the compiled programs that take it are the same for every
+    sensor of one geometry and layout shape (a sensor file renamed, or one layout
+    against another, compiles nothing again).
+
     **Fields:**
 
-    - `name`: the sensor's name (static).
     - `field`: the unit-modulus PressureField of the elastomer, frame S.
     - `clusters`: TetClusters of its tets, for the contact broad phase.
     - `layout`: the taxels.
@@ -38,7 +41,6 @@ class SensorModel(eqx.Module):
     - `num_rays`: rays per receptive field (static).
     """
 
-    name: str = eqx.field(static=True)
     field: PressureField
     clusters: TetClusters
     layout: TaxelLayout
@@ -92,7 +94,6 @@ def _make_sensor_model(spec, field_kind, num_rays: int, mesh) -> SensorModel:
         strain = jnp.asarray(calc_distance_field(mesh, source=spec.name))
     center = spec.contact_center_S
     return SensorModel(
-        name=spec.name,
         field=make_pressure_field(mesh, strain, 1.0),
         clusters=make_tet_clusters(mesh.vertices, mesh.tets),
         layout=make_taxel_layout(spec.taxel_positions_S, spec.taxel_axes_S, spec.taxel_field_kinds, spec.taxel_field_sizes),

@@ -1,0 +1,232 @@
+"""A designed barometer layout against the built-in, a regular and a random one, proven
+by retraining: the same binned GRU trained on a dataset made with each layout.
+
+1. **Design** (`hydrotact.design.design_layout`): sphere8's eight barometers placed
+   and pointed by gradient of the D-optimal information (the mean log det of the
+   Fisher information of the contact point and force), from the sensor's own layout
+   and random feasible starts, on a pool of contacts of the dataset regime; every
+   layout below is also scored on the design's held-out contacts (score and the RMS
+   Cramér–Rao bound on the localisation error).
+2. **Layouts**: `designed`; `built-in` (the sensor spec's); `regular` (one barometer
+   at the centre facing +z, the others evenly round a ring facing outwards at 45°,
+   projected onto the design's constraints); `random` (the design's first random
+   feasible start, before optimisation).
+3. **Retraining**: for each layout a dataset from the same seed and material (the
+   ablation's silicone; the same events, presses and sensor variation: only where the
+   barometers are differs), and the binned GRU (the defaults of `hydrotact train`)
+   trained on each with several seeds, evaluated on each dataset's held-out blocks:
+   θ and φ RMSE, the arc-length error, force RMSE, each as mean and spread (standard
+   deviation) over the seeds.
+
+Outputs (in --output, default experiments/results/): `layout_design.json` (the
+scores, every run's metrics, the settings, the timings), `layout_design.md` (the
+table), `layout_design.png` (the metrics per layout with their spread),
+`layout_design_layouts.png` (the four layouts inside the cut-open elastomer),
+`layout_design_convergence.png` and the designed sensor `layout_design_sensor.json`.
+The design, datasets and models are kept under `layout_design.work/` and resume when
+the script is run again.
+
+Run: `.venv/bin/python experiments/layout_design.py [--events 1000] [--seeds 3] [--smoke]`.
+"""
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import numpy as np  # noqa: E402
+from ablation_table1 import MATERIAL, SMOKE_REGIME, summarise_metrics  # noqa: E402  (its neighbour in experiments/: the same silicone, tiny regime, table)
+
+from hydrotact._files import atomic_path, write_text_atomic  # noqa: E402
+from hydrotact.data import make_material_document, write_material  # noqa: E402
+from hydrotact.datasets import DatasetConfig, generate_dataset, load_dataset  # noqa: E402
+from hydrotact.design import DesignConfig, design_layout, make_feasible_region  # noqa: E402
+from hydrotact.models import TrainConfig, calc_skin_radius, evaluate_estimator, save_estimator, train_estimator  # noqa: E402
+from hydrotact.sensors import document_text, load_sensor  # noqa: E402
+
+NAME = "layout_design"
+LAYOUTS = ("designed", "built-in", "regular", "random")
+METRICS = ("theta_rmse", "phi_rmse", "arc_length_mean", "fn_rmse", "fx_rmse", "fy_rmse", "fz_rmse", "contact_bce")
+RING_TILT_DEG = 45.0
+
+
+def make_regular_layout(spec, region) -> tuple[np.ndarray, np.ndarray]:
+    """One barometer at the board's centre facing +z and the rest evenly round a ring
+    (half the elastomer's footprint radius, at the built-in layout's mean height),
+    each facing outwards at RING_TILT_DEG; projected onto `region`'s constraints."""
+    count = spec.num_taxels
+    mesh = spec.make_mesh(check=False)
+    lo, hi = np.min(mesh.vertices, axis=0), np.max(mesh.vertices, axis=0)
+    centre = 0.5 * (lo + hi)
+    radius = 0.25 * min(hi[0] - lo[0], hi[1] - lo[1])
+    height = float(np.mean(spec.taxel_positions_S[:, 2]))
+    angles = 2.0 * np.pi * np.arange(count - 1) / (count - 1)
+    positions = np.vstack([[centre[0], centre[1], height], np.column_stack([centre[0] + radius * np.cos(angles), centre[1] + radius * np.sin(angles), np.full(count - 1, height)])])
+    tilt = np.radians(RING_TILT_DEG)
+    axes = np.vstack([[0.0, 0.0, 1.0], np.column_stack([np.sin(tilt) * np.cos(angles), np.sin(tilt) * np.sin(angles), np.full(count - 1, np.cos(tilt))])])
+    return region.project_positions(positions), region.project_axes(axes)
+
+
+def _score(score) -> dict:
+    return {"score": score.score, "held_out_score": score.held_out_score, "rms_bound_m": score.rms_bound}
+
+
+def _design(spec, args, smoke: bool, work: Path, material: dict) -> dict:
+    """The design and the four layouts' sensor files and scores (kept in work/design.json)."""
+    kept = work / "design.json"
+    if kept.is_file():
+        return json.loads(kept.read_text())
+    if smoke:
+        config = DesignConfig(contacts=8, num_rays=8, restarts=1, steps=6)
+        regime = DatasetConfig(probe="sphere:r=3mm,subdivisions=1")
+    else:
+        config = DesignConfig(contacts=args.design_contacts, batch=args.design_batch, num_rays=8, restarts=args.design_restarts, steps=args.design_steps)
+        regime = DatasetConfig()
+    region = make_feasible_region(spec.make_mesh(check=False), "inside", config.margin, config.spacing, config.max_tilt_deg)
+    regular = make_regular_layout(spec, region)
+    design = design_layout(spec, config=config, regime=regime, material=material, compare={"regular": regular}, checkpoint=work / "design.partial", progress=not smoke)
+    random_index = design.start_names.index("random 0")
+    layouts = {
+        "designed": design.spec,
+        "built-in": spec,
+        "regular": _with_positions(spec, *regular, "regular"),
+        "random": _with_positions(spec, *design.start_layouts[random_index], "random"),
+    }
+    files = {}
+    for name, layout in layouts.items():
+        files[name] = str(work / "sensors" / f"{name}.json")
+        write_text_atomic(Path(files[name]), document_text(layout))
+    scores = {"designed": _score(design.designed), "built-in": _score(design.builtin), "regular": _score(design.compared["regular"]), "random": _score(design.random[random_index - 1])}
+    result = {
+        "config": config.to_json(), "design_contacts_probe": regime.probe, "scores": scores, "sensors": files, "elapsed_s": design.elapsed_s,
+        "histories": [np.asarray(h).tolist() for h in design.histories], "start_names": design.start_names,
+    }
+    write_text_atomic(kept, json.dumps(result, indent=2) + "\n")
+    return result
+
+
+def _with_positions(spec, positions, axes, label: str):
+    import dataclasses
+
+    moved = dataclasses.replace(spec, name=f"{spec.name}_{label}", description=f"{spec.description} Layout: {label} (experiments/layout_design.py).",
+                                taxel_positions_S=np.asarray(positions), taxel_axes_S=np.asarray(axes))
+    return load_sensor(moved.to_json(), source=f"the {label} layout")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sensor", default="sphere8")
+    parser.add_argument("--events", type=int, default=1000)
+    parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--max-epochs", type=int, default=TrainConfig().max_epochs)
+    parser.add_argument("--design-contacts", type=int, default=96)
+    parser.add_argument("--design-batch", type=int, default=16)
+    parser.add_argument("--design-steps", type=int, default=60)
+    parser.add_argument("--design-restarts", type=int, default=2)
+    parser.add_argument("--output", type=Path, default=Path(__file__).parent / "results")
+    parser.add_argument("--smoke", action="store_true", help="a tiny design, tiny datasets, one seed, two epochs: for the tests")
+    args = parser.parse_args()
+    smoke = {}
+    if args.smoke:
+        args.events, args.seeds, args.max_epochs = 12, 1, 2
+        smoke = {"sequence_length": 64, "burn_in": 32, "batch_size": 8}
+    output = args.output
+    work = output / f"{NAME}.work"
+    work.mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
+    spec = load_sensor(args.sensor)
+    material = make_material_document(*MATERIAL, name=NAME)
+    material_file = write_material(work / "material.json", material)
+    t = time.perf_counter()
+    design = _design(spec, args, args.smoke, work, material)
+    timings = {"design": time.perf_counter() - t}
+    radius = calc_skin_radius(spec)
+    runs = []
+    for layout in LAYOUTS:
+        t = time.perf_counter()
+        folder = work / f"{layout}_dataset"
+        config = DatasetConfig(events=args.events, **(SMOKE_REGIME if args.smoke else {}))
+        generate_dataset(design["sensors"][layout], folder, material=material_file, config=config, progress=not args.smoke)
+        dataset = load_dataset(folder)
+        timings[f"generate {layout}"] = time.perf_counter() - t
+        rate = float(dataset.manifest["config"]["rate_hz"])
+        for seed in range(args.seeds):
+            model = work / f"{layout}_gru_binned_{seed}"
+            model.mkdir(exist_ok=True)
+            t = time.perf_counter()
+            trained = train_estimator(dataset, load_sensor(design["sensors"][layout]), TrainConfig(seed=seed, max_epochs=args.max_epochs, **smoke), folder=model)
+            save_estimator(trained, model, design["sensors"][layout])
+            result = evaluate_estimator(trained, dataset.blocks("test"), rate, radius)
+            runs.append({"layout": layout, "seed": seed, "epochs": len(trained.history), "best_epoch": trained.best_epoch,
+                         "wall_seconds": time.perf_counter() - t, "metrics": result["metrics"]})
+            print(f"{layout} seed {seed}: " + ", ".join(f"{k} {v:.3g}" for k, v in result["metrics"].items()), flush=True)
+    table = _table(runs, design["scores"])
+    document = {
+        "settings": {"sensor": args.sensor, "events": args.events, "seeds": args.seeds, "max_epochs": args.max_epochs, "smoke": args.smoke, "material": MATERIAL},
+        "design": design, "table": table, "runs": runs, "timings_s": timings | {"total": time.perf_counter() - started},
+    }
+    output.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(output / f"{NAME}.json", json.dumps(document, indent=2) + "\n")
+    settings = (f"{args.sensor}; {args.events} events per dataset, {args.seeds} seed(s), at most {args.max_epochs} epochs{' (smoke)' if args.smoke else ''}; "
+                f"design: {design['config']['contacts']} contacts (+ as many held out), {design['config']['restarts']} random starts, {design['config']['steps']} steps; "
+                f"{document['timings_s']['total'] / 60:.0f} min in all.")
+    write_text_atomic(output / f"{NAME}.md", settings + "\n\n" + _markdown(table))
+    write_text_atomic(output / f"{NAME}_sensor.json", Path(design["sensors"]["designed"]).read_text())
+    _plot(table, output / f"{NAME}.png")
+    from hydrotact.viz import plot_design_convergence, render_layouts
+
+    render_layouts(spec.make_mesh(check=False), {name: load_sensor(design["sensors"][name]) for name in LAYOUTS}, output / f"{NAME}_layouts.png")
+    plot_design_convergence(design["histories"], design["start_names"], output / f"{NAME}_convergence.png", design["config"]["objective"])
+    print(settings + "\n\n" + _markdown(table))
+    print(f"written {output / NAME}.json, .md, .png, _layouts.png, _convergence.png, _sensor.json")
+
+
+def _table(runs: list, scores: dict) -> list:
+    table = []
+    for layout in LAYOUTS:
+        members = [run for run in runs if run["layout"] == layout]
+        entry = {"layout": layout, "seeds": len(members)} | {f"design_{k}": v for k, v in scores[layout].items()}
+        table.append(entry | summarise_metrics(members, METRICS))
+    return table
+
+
+def _markdown(table: list) -> str:
+    head = "| layout | design score (held out) | RMS bound (mm) | " + " | ".join(METRICS) + " |\n|---|---:|---:|" + "---:|" * len(METRICS) + "\n"
+    cell = lambda e, n: f"{e[n]['mean']:.3g} ± {e[n]['std']:.2g}" if n in e else "-"
+    body = "".join(
+        f"| {e['layout']} | {e['design_held_out_score']:.4g} | {e['design_rms_bound_m'] * 1e3:.3g} | " + " | ".join(cell(e, n) for n in METRICS) + " |\n" for e in table
+    )
+    return ("Design score: the mean log det of the Fisher information of (contact point, force) on the design's held-out contacts (higher is better); "
+            "RMS bound: the Cramér–Rao bound on the localisation error. After training the binned GRU on each layout's dataset: RMSE in N (forces) and rad "
+            "(angles), arc length in m, contact BCE; mean ± standard deviation over seeds.\n\n" + head + body)
+
+
+def _plot(table: list, path: Path) -> None:
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(11, 4))
+    axes = figure.subplots(1, 3)
+    x = np.arange(len(table))
+    panels = ((axes[0], ("theta_rmse", "phi_rmse"), "held-out RMSE (rad)", 1.0), (axes[1], ("arc_length_mean",), "mean arc-length error (mm)", 1e3),
+              (axes[2], ("fn_rmse", "fx_rmse", "fy_rmse", "fz_rmse"), "held-out RMSE (N)", 1.0))
+    for axis, names, label, scale in panels:
+        for k, name in enumerate(names):
+            means = [e[name]["mean"] * scale if name in e else np.nan for e in table]
+            spread = [e[name]["std"] * scale if name in e else 0.0 for e in table]
+            axis.bar(x + (k - len(names) / 2 + 0.5) * 0.8 / len(names), means, 0.8 / len(names), yerr=spread, capsize=2, label=name.removesuffix("_rmse").removesuffix("_mean"))
+        axis.set_xticks(x, [e["layout"] for e in table], fontsize=8)
+        axis.set_ylabel(label)
+        axis.legend(fontsize=7)
+    figure.suptitle("The binned GRU trained on each layout's dataset (mean and spread over seeds)", fontsize=9)
+    figure.tight_layout()
+    with atomic_path(path) as tmp:
+        figure.savefig(tmp, dpi=130)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
