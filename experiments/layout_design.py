@@ -6,7 +6,8 @@ by retraining: the same binned GRU trained on a dataset made with each layout.
    Fisher information of the contact point and force), from the sensor's own layout
    and random feasible starts, on a pool of contacts of the dataset regime; every
    layout below is also scored on the design's held-out contacts (score and the RMS
-   Cramér–Rao bound on the localisation error).
+   Cramér–Rao bound on the localisation error). The design's contacts press a coarser
+   mesh of the same 3 mm sphere (`--design-probe`; see DESIGN_PROBE).
 2. **Layouts**: `designed`; `built-in` (the sensor spec's); `regular` (one barometer
    at the centre facing +z, the others evenly round a ring facing outwards at 45°,
    projected onto the design's constraints); `random` (the design's first random
@@ -53,6 +54,10 @@ NAME = "layout_design"
 LAYOUTS = ("designed", "built-in", "regular", "random")
 METRICS = ("theta_rmse", "phi_rmse", "arc_length_mean", "fn_rmse", "fx_rmse", "fy_rmse", "fz_rmse", "contact_bce")
 RING_TILT_DEG = 45.0
+DESIGN_PROBE = "sphere:r=3mm,subdivisions=1"
+"""The design's contacts press a coarser 3 mm sphere than the datasets' (measured: with
+the regime's own mesh, 96 + 96 linearised contacts grew the design past 22 GB and the
+2-core machine's 23 GB killed it; see benchmarks/RESULTS.md, "Layout design")."""
 
 
 def make_regular_layout(spec, region) -> tuple[np.ndarray, np.ndarray]:
@@ -86,7 +91,7 @@ def _design(spec, args, smoke: bool, work: Path, material: dict) -> dict:
         regime = DatasetConfig(probe="sphere:r=3mm,subdivisions=1")
     else:
         config = DesignConfig(contacts=args.design_contacts, batch=args.design_batch, num_rays=8, restarts=args.design_restarts, steps=args.design_steps)
-        regime = DatasetConfig()
+        regime = DatasetConfig(probe=args.design_probe)
     region = make_feasible_region(spec.make_mesh(check=False), "inside", config.margin, config.spacing, config.max_tilt_deg)
     regular = make_regular_layout(spec, region)
     design = design_layout(spec, config=config, regime=regime, material=material, compare={"regular": regular}, checkpoint=work / "design.partial", progress=not smoke)
@@ -128,6 +133,7 @@ def main() -> None:
     parser.add_argument("--design-batch", type=int, default=16)
     parser.add_argument("--design-steps", type=int, default=60)
     parser.add_argument("--design-restarts", type=int, default=2)
+    parser.add_argument("--design-probe", default=DESIGN_PROBE, help="the probe of the design's contacts (the datasets use the regime's own)")
     parser.add_argument("--output", type=Path, default=Path(__file__).parent / "results")
     parser.add_argument("--smoke", action="store_true", help="a tiny design, tiny datasets, one seed, two epochs: for the tests")
     args = parser.parse_args()
