@@ -149,7 +149,8 @@ def main() -> None:
     }
     output.mkdir(parents=True, exist_ok=True)
     write_text_atomic(output / f"{NAME}.json", json.dumps(document, indent=2) + "\n")
-    settings = f"{args.events} events per dataset, {args.seeds} seed(s), at most {args.max_epochs} epochs{' (smoke)' if args.smoke else ''}; {document['timings_s']['total'] / 60:.0f} min in all."
+    settings = (f"{args.events} events per dataset, {args.seeds} seed(s), at most {args.max_epochs} epochs{' (smoke)' if args.smoke else ''}; "
+                f"{document['timings_s']['total'] / 60:.0f} min in this invocation (datasets and models read back from the work folder not counted).")
     write_text_atomic(output / f"{NAME}.md", settings + " " + _markdown(table, ageing))
     _plot(table, output / f"{NAME}.png")
     for sensor_name in sensors:

@@ -180,7 +180,8 @@ def main() -> None:
     write_text_atomic(output / f"{NAME}.json", json.dumps(document, indent=2) + "\n")
     settings = (f"{args.sensor}; {args.events} events per dataset, {args.seeds} seed(s), at most {args.max_epochs} epochs{' (smoke)' if args.smoke else ''}; "
                 f"design: {design['config']['contacts']} contacts (+ as many held out), {design['config']['restarts']} random starts, {design['config']['steps']} steps; "
-                f"{document['timings_s']['total'] / 60:.0f} min in all.")
+                f"{document['timings_s']['total'] / 60:.0f} min in this invocation"
+                f" (datasets and models read back from the work folder not counted).")
     write_text_atomic(output / f"{NAME}.md", settings + "\n\n" + _markdown(table))
     write_text_atomic(output / f"{NAME}_sensor.json", Path(design["sensors"]["designed"]).read_text())
     _plot(table, output / f"{NAME}.png")
