@@ -88,7 +88,7 @@ def _design(spec, args, smoke: bool, work: Path, material: dict) -> dict:
         return json.loads(kept.read_text())
     if smoke:
         config = DesignConfig(contacts=8, num_rays=8, restarts=1, steps=6)
-        regime = DatasetConfig(probe="sphere:r=3mm,subdivisions=1")
+        regime = DatasetConfig(probe=SMOKE_REGIME["probe"])
     else:
         config = DesignConfig(contacts=args.design_contacts, batch=args.design_batch, num_rays=8, restarts=args.design_restarts, steps=args.design_steps)
         regime = DatasetConfig(probe=args.design_probe)

@@ -125,16 +125,19 @@ def linearise_contacts(model, probe, modulus: float, points_S, normals_S, target
     rotations = jnp.asarray(rotation_vectors, dtype=jnp.float64)
     modulus_ = jnp.asarray(float(modulus))
     deepest = np.broadcast_to(np.asarray(deepest, dtype=np.float64), targets.shape)
-    capacity = START_CAPACITY
+    capacity = fitted = START_CAPACITY
 
-    def grown(kernel, depths):
-        nonlocal capacity
-        result, fitted = run_growing(lambda c: kernel(model, probe, c, jnp.asarray(depths), points, directions, rotations), capacity)
-        capacity = fitted.rounded_up()  # the linearised contact compiles in about a minute on a laptop CPU
-        return result
+    def grown(kernel, depths, start):
+        result, fitted = run_growing(lambda c: kernel(model, probe, c, jnp.asarray(depths), points, directions, rotations), start)
+        return result, fitted.rounded_up()
 
     def log_force_gap(x):
-        force = modulus * np.asarray(grown(_force_kernel, np.exp(x)).forces)
+        nonlocal capacity, fitted
+        result, fitted = grown(_force_kernel, np.exp(x), capacity)
+        # Never shrunk during the search: its iterates go deeper and shallower, and each
+        # new capacity compiles the kernel again.
+        capacity = type(capacity)(*(int(size) for size in np.maximum(capacity.sizes, fitted.sizes)))
+        force = modulus * np.asarray(result.forces)
         return np.log(np.maximum(force, 1e-300)) - np.log(np.asarray(targets))
 
     # The secant method on log F against log d (a power law F ~ d^k is solved in one
@@ -155,7 +158,9 @@ def linearise_contacts(model, probe, modulus: float, points_S, normals_S, target
         x = np.where((slope > 0.0) & (secant > low) & (secant < high), secant, 0.5 * (low + high))
         x = np.where(np.abs(f) < 1e-6, x_old, x)  # converged: stay
     depths = np.exp(x)
-    linear = grown(_linear_kernel, depths)
+    # Sized to the last iterate's contacts, not the deepest met: the linearised contact
+    # compiles in about a minute on a laptop CPU and its memory grows with the buffers.
+    linear, _ = grown(_linear_kernel, depths, fitted)
     forces = modulus * np.asarray(linear.forces)
     return DesignContacts(
         surfaces=linear.surfaces,
