@@ -64,7 +64,7 @@ material_path = write_material(
     make_material_document(6e6, [2.5e6, 1.5e6], [0.8, 12.0], covariance=np.diag([0.01, 0.04, 0.04, 0.02, 0.02]), name="silicone (example)"),
 )
 if SMOKE:
-    config = DatasetConfig(events=4, seed=0, num_rays=16, hold_range=(0.3, 0.6), gap_range=(0.2, 0.4), speed_range=(0.01, 0.02), force_range=(0.2, 2.0))
+    config = DatasetConfig(events=4, seed=0, probe="sphere:r=3mm,subdivisions=1", num_rays=16, hold_range=(0.3, 0.6), gap_range=(0.2, 0.4), speed_range=(0.01, 0.02), force_range=(0.2, 2.0))
 else:
     config = DatasetConfig(events=300, seed=0)
 print(config)

@@ -55,7 +55,7 @@ from hydrotact.models import count_macs, count_parameters, make_estimator_spec
 from hydrotact.sensors import load_sensor
 
 if SMOKE:
-    config = DatasetConfig(events=12, seed=1, num_rays=8, hold_range=(0.3, 0.8), gap_range=(0.2, 0.4), speed_range=(0.01, 0.02), force_range=(0.2, 4.0))
+    config = DatasetConfig(events=12, seed=1, probe="sphere:r=3mm,subdivisions=1", num_rays=8, hold_range=(0.3, 0.8), gap_range=(0.2, 0.4), speed_range=(0.01, 0.02), force_range=(0.2, 4.0))
 else:
     config = DatasetConfig(events=400, seed=1)
 generate_dataset("sphere8", OUT / "dataset", config=config)

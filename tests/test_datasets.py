@@ -33,9 +33,11 @@ from hydrotact.datasets import (
 )
 from hydrotact.sensors import load_sensor
 
-# Smoke size: a handful of short events, 16 rays per receptive field.
+# Smoke size: a handful of short events, 16 rays per receptive field, the regime's 3 mm
+# sphere meshed coarsely (its contacts cost a fifth).
+COARSE_SPHERE = "sphere:r=3mm,subdivisions=1"
 ARGS = [
-    "--sensor", "sphere8", "--events", "5", "--seed", "3", "--rays", "16", "--hold-range", "0.3,0.6", "--gap-range", "0.2,0.4",
+    "--sensor", "sphere8", "--probe", COARSE_SPHERE, "--events", "5", "--seed", "3", "--rays", "16", "--hold-range", "0.3,0.6", "--gap-range", "0.2,0.4",
     "--speed-range", "0.01,0.02", "--force-range", "0.2,2", "--noise", "0", "--gain-spread", "0.05", "--offset-spread", "100", "--shard-rows", "300",
 ]
 # E(0) 8 MPa, near the generator's 10 MPa default: a softer skin (0.8 MPa was used here
@@ -221,7 +223,7 @@ def test_labels_agree_with_the_forward_model(reference):
     signal = make_barometer_signal(spec.part, spec.num_taxels, gains=variation["gains"], offsets=variation["offsets_Pa"], noise_rms=0.0)
     capacity = SimCapacity(tets=2048, others=2048, pairs=16384, polygons=4096, taxel_pairs=8192, taxel_pieces=16384)
     while True:  # the buffers the whole session needs (calc_simulation flags an overflow, never truncates silently)
-        samples = jax.jit(lambda t, capacity=capacity: calc_simulation(model, material, parse_probe("sphere:r=3mm"), t, capacity, barometer=signal))(trajectory)
+        samples = jax.jit(lambda t, capacity=capacity: calc_simulation(model, material, parse_probe(manifest["probe"]), t, capacity, barometer=signal))(trajectory)
         overflow = np.asarray(samples.unit.did_overflow)
         if not overflow.any():
             break
@@ -245,7 +247,7 @@ def test_residual_stress_carries_from_event_to_event():
     from hydrotact.visco import calc_hereditary_integral, make_prony
 
     spec = load_sensor("sphere8")
-    config = DatasetConfig(events=2, seed=4, num_rays=16, hold_range=(4.0, 4.0), gap_range=(0.3, 0.3), speed_range=(0.02, 0.02), force_range=(0.3, 0.5))
+    config = DatasetConfig(events=2, seed=4, probe=COARSE_SPHERE, num_rays=16, hold_range=(4.0, 4.0), gap_range=(0.3, 0.3), speed_range=(0.02, 0.02), force_range=(0.3, 0.5))
     model = make_sensor_model(spec, num_rays=16)
     from hydrotact.contact import parse_probe
 
@@ -280,7 +282,7 @@ def test_presses_at_the_board_stop_at_their_target_along_the_approach():
     from hydrotact.sim import make_sensor_model
 
     spec = load_sensor("sphere8")
-    config = DatasetConfig(events=250, num_rays=16, force_range=(4.0, 6.0))
+    config = DatasetConfig(events=250, probe=COARSE_SPHERE, num_rays=16, force_range=(4.0, 6.0))
     plan = sample_events(find_touchable_skin(spec, spec.make_mesh(check=False)), config, np.random.default_rng(4))
     lowest = np.argsort(plan.points[:, 2])[:2]
     assert np.all(plan.points[lowest, 2] < 0.5e-3)  # at the board (z = 0)

@@ -112,7 +112,7 @@ def test_sequences_with_burn_in_cover_each_label_once_and_windows_match_the_pape
 
 # --- training on a tiny generated dataset ------------------------------------------
 
-TINY = ["--sensor", "sphere8", "--events", "16", "--seed", "5", "--rays", "8", "--hold-range", "0.3,0.8", "--gap-range", "0.2,0.4",
+TINY = ["--sensor", "sphere8", "--probe", "sphere:r=3mm,subdivisions=1", "--events", "16", "--seed", "5", "--rays", "8", "--hold-range", "0.3,0.8", "--gap-range", "0.2,0.4",
         "--speed-range", "0.01,0.02", "--force-range", "0.2,4", "--noise", "2", "--no-plots", "--json"]
 QUICK = dict(hidden=(8, 8), sequence_length=64, burn_in=32, batch_size=8, learning_rate=1e-2, max_epochs=80, patience=80)
 
