@@ -4,14 +4,19 @@ by retraining: the same binned GRU trained on a dataset made with each layout.
 1. **Design** (`hydrotact.design.design_layout`): sphere8's eight barometers placed
    and pointed by gradient of the D-optimal information (the mean log det of the
    Fisher information of the contact point and force), from the sensor's own layout
-   and random feasible starts, on a pool of contacts of the dataset regime; every
-   layout below is also scored on the design's held-out contacts (score and the RMS
+   and random feasible starts, on a pool of contacts of the dataset regime; the
+   baselines are scored on the design's held-out contacts too (score and the RMS
    Cramér–Rao bound on the localisation error). The design's contacts press a coarser
-   mesh of the same 3 mm sphere (`--design-probe`; see DESIGN_PROBE).
-2. **Layouts**: `designed`; `built-in` (the sensor spec's); `regular` (one barometer
-   at the centre facing +z, the others evenly round a ring facing outwards at 45°,
-   projected onto the design's constraints); `random` (the design's first random
-   feasible start, before optimisation).
+   mesh of the same 3 mm sphere (`--design-probe`; see DESIGN_PROBE). Two designs:
+   - on **risers** as high as the built-in's highest (sphere8's barometers stand 1
+     and 2 mm above its board): the same kind of sensor as the built-in, the main
+     comparison;
+   - **inside**: anywhere in the elastomer (1 mm from its boundary), barometers cast
+     in up to just under the skin.
+2. **Layouts**: `designed` (on risers); `built-in` (the sensor spec's); `regular`
+   (one barometer at the centre facing +z, the others evenly round a ring facing
+   outwards at 45°, projected onto the risers' constraints); `random` (the inside
+   design's first random feasible start, before optimisation); `designed-inside`.
 3. **Retraining**: for each layout a dataset from the same seed and material (the
    ablation's silicone; the same events, presses and sensor variation: only where the
    barometers are differs), and the binned GRU (the defaults of `hydrotact train`)
@@ -51,7 +56,10 @@ from hydrotact.models import TrainConfig, calc_skin_radius, evaluate_estimator, 
 from hydrotact.sensors import document_text, load_sensor  # noqa: E402
 
 NAME = "layout_design"
-LAYOUTS = ("designed", "built-in", "regular", "random")
+LAYOUTS = ("designed", "built-in", "regular", "random", "designed-inside")
+DESIGNS = ("risers", "inside")
+DESIGN_OF = {"designed": "risers", "built-in": "risers", "regular": "risers", "random": "inside", "designed-inside": "inside"}
+"""The design whose held-out contacts score each layout (the two designs draw their own)."""
 METRICS = ("theta_rmse", "phi_rmse", "arc_length_mean", "fn_rmse", "fx_rmse", "fy_rmse", "fz_rmse", "contact_bce")
 RING_TILT_DEG = 45.0
 DESIGN_PROBE = "sphere:r=3mm,subdivisions=1"
@@ -81,38 +89,40 @@ def _score(score) -> dict:
     return {"score": score.score, "held_out_score": score.held_out_score, "rms_bound_m": score.rms_bound}
 
 
-def _design(spec, args, smoke: bool, work: Path, material: dict) -> dict:
-    """The design and the four layouts' sensor files and scores (kept in work/design.json)."""
-    kept = work / "design.json"
+def _design(spec, args, smoke: bool, work: Path, material: dict, design: str) -> dict:
+    """One design (`design`: "risers" or "inside"), its layouts' sensor files and
+    scores (kept in work/design_{design}.json): on risers the designed, built-in and
+    regular layouts; inside the designed one and its first random start."""
+    kept = work / f"design_{design}.json"
     if kept.is_file():
         return json.loads(kept.read_text())
+    max_height = float(np.max(spec.taxel_positions_S[:, 2]) - np.min(spec.make_mesh(check=False).vertices[:, 2])) if design == "risers" else None
     if smoke:
-        config = DesignConfig(contacts=8, num_rays=8, restarts=1, steps=6)
+        config = DesignConfig(contacts=8, num_rays=8, restarts=1, steps=6, max_height=max_height)
         regime = DatasetConfig(probe=SMOKE_REGIME["probe"])
     else:
-        config = DesignConfig(contacts=args.design_contacts, batch=args.design_batch, num_rays=8, restarts=args.design_restarts, steps=args.design_steps)
+        config = DesignConfig(contacts=args.design_contacts, batch=args.design_batch, num_rays=8, restarts=args.design_restarts, steps=args.design_steps, max_height=max_height)
         regime = DatasetConfig(probe=args.design_probe)
-    region = make_feasible_region(spec.make_mesh(check=False), "inside", config.margin, config.spacing, config.max_tilt_deg)
+    region = make_feasible_region(spec.make_mesh(check=False), "inside", config.margin, config.spacing, config.max_tilt_deg, max_height)
     regular = make_regular_layout(spec, region)
-    design = design_layout(spec, config=config, regime=regime, material=material, compare={"regular": regular}, checkpoint=work / "design.partial", progress=not smoke)
-    random_index = design.start_names.index("random 0")
-    layouts = {
-        "designed": design.spec,
-        "built-in": spec,
-        "regular": _with_positions(spec, *regular, "regular"),
-        "random": _with_positions(spec, *design.start_layouts[random_index], "random"),
-    }
+    result = design_layout(spec, config=config, regime=regime, material=material, compare={"regular": regular}, checkpoint=work / f"design_{design}.partial", progress=not smoke)
+    random_index = result.start_names.index("random 0")
+    if design == "risers":
+        layouts = {"designed": result.spec, "built-in": spec, "regular": _with_positions(spec, *regular, "regular")}
+        scores = {"designed": _score(result.designed), "built-in": _score(result.builtin), "regular": _score(result.compared["regular"]), "random start": _score(result.random[random_index - 1])}
+    else:
+        layouts = {"designed-inside": result.spec, "random": _with_positions(spec, *result.start_layouts[random_index], "random")}
+        scores = {"designed-inside": _score(result.designed), "random": _score(result.random[random_index - 1]), "built-in": _score(result.builtin), "regular": _score(result.compared["regular"])}
     files = {}
     for name, layout in layouts.items():
         files[name] = str(work / "sensors" / f"{name}.json")
         write_text_atomic(Path(files[name]), document_text(layout))
-    scores = {"designed": _score(design.designed), "built-in": _score(design.builtin), "regular": _score(design.compared["regular"]), "random": _score(design.random[random_index - 1])}
-    result = {
-        "config": config.to_json(), "design_contacts_probe": regime.probe, "scores": scores, "sensors": files, "elapsed_s": design.elapsed_s,
-        "histories": [np.asarray(h).tolist() for h in design.histories], "start_names": design.start_names,
+    document = {
+        "config": config.to_json(), "design_contacts_probe": regime.probe, "scores": scores, "sensors": files, "elapsed_s": result.elapsed_s,
+        "histories": [np.asarray(h).tolist() for h in result.histories], "start_names": result.start_names,
     }
-    write_text_atomic(kept, json.dumps(result, indent=2) + "\n")
-    return result
+    write_text_atomic(kept, json.dumps(document, indent=2) + "\n")
+    return document
 
 
 def _with_positions(spec, positions, axes, label: str):
@@ -148,16 +158,21 @@ def main() -> None:
     spec = load_sensor(args.sensor)
     material = make_material_document(*MATERIAL, name=NAME)
     material_file = write_material(work / "material.json", material)
-    t = time.perf_counter()
-    design = _design(spec, args, args.smoke, work, material)
-    timings = {"design": time.perf_counter() - t}
+    timings = {}
+    designs = {}
+    for name in DESIGNS:
+        t = time.perf_counter()
+        designs[name] = _design(spec, args, args.smoke, work, material, name)
+        timings[f"design {name}"] = time.perf_counter() - t
+    sensors = designs["risers"]["sensors"] | designs["inside"]["sensors"]
+    scores = {layout: designs[DESIGN_OF[layout]]["scores"][layout] | {"pool": DESIGN_OF[layout]} for layout in LAYOUTS}
     radius = calc_skin_radius(spec)
     runs = []
     for layout in LAYOUTS:
         t = time.perf_counter()
         folder = work / f"{layout}_dataset"
         config = DatasetConfig(events=args.events, **(SMOKE_REGIME if args.smoke else {}))
-        generate_dataset(design["sensors"][layout], folder, material=material_file, config=config, progress=not args.smoke)
+        generate_dataset(sensors[layout], folder, material=material_file, config=config, progress=not args.smoke)
         dataset = load_dataset(folder)
         timings[f"generate {layout}"] = time.perf_counter() - t
         rate = float(dataset.manifest["config"]["rate_hz"])
@@ -165,30 +180,33 @@ def main() -> None:
             model = work / f"{layout}_gru_binned_{seed}"
             model.mkdir(exist_ok=True)
             t = time.perf_counter()
-            trained = train_estimator(dataset, load_sensor(design["sensors"][layout]), TrainConfig(seed=seed, max_epochs=args.max_epochs, **smoke), folder=model)
-            save_estimator(trained, model, design["sensors"][layout])
+            trained = train_estimator(dataset, load_sensor(sensors[layout]), TrainConfig(seed=seed, max_epochs=args.max_epochs, **smoke), folder=model)
+            save_estimator(trained, model, sensors[layout])
             result = evaluate_estimator(trained, dataset.blocks("test"), rate, radius)
             runs.append({"layout": layout, "seed": seed, "epochs": len(trained.history), "best_epoch": trained.best_epoch,
                          "wall_seconds": time.perf_counter() - t, "metrics": result["metrics"]})
             print(f"{layout} seed {seed}: " + ", ".join(f"{k} {v:.3g}" for k, v in result["metrics"].items()), flush=True)
-    table = _table(runs, design["scores"])
+    table = _table(runs, scores)
     document = {
         "settings": {"sensor": args.sensor, "events": args.events, "seeds": args.seeds, "max_epochs": args.max_epochs, "smoke": args.smoke, "material": MATERIAL},
-        "design": design, "table": table, "runs": runs, "timings_s": timings | {"total": time.perf_counter() - started},
+        "designs": designs, "table": table, "runs": runs, "timings_s": timings | {"total": time.perf_counter() - started},
     }
     output.mkdir(parents=True, exist_ok=True)
     write_text_atomic(output / f"{NAME}.json", json.dumps(document, indent=2) + "\n")
     settings = (f"{args.sensor}; {args.events} events per dataset, {args.seeds} seed(s), at most {args.max_epochs} epochs{' (smoke)' if args.smoke else ''}; "
-                f"design: {design['config']['contacts']} contacts (+ as many held out), {design['config']['restarts']} random starts, {design['config']['steps']} steps; "
+                f"each design: {designs['risers']['config']['contacts']} contacts (+ as many held out), {designs['risers']['config']['restarts']} random starts, "
+                f"{designs['risers']['config']['steps']} steps, risers at most {designs['risers']['config']['max_height'] * 1e3:.3g} mm high; "
                 f"{document['timings_s']['total'] / 60:.0f} min in this invocation"
                 f" (datasets and models read back from the work folder not counted).")
     write_text_atomic(output / f"{NAME}.md", settings + "\n\n" + _markdown(table))
-    write_text_atomic(output / f"{NAME}_sensor.json", Path(design["sensors"]["designed"]).read_text())
+    write_text_atomic(output / f"{NAME}_sensor.json", Path(sensors["designed"]).read_text())
     _plot(table, output / f"{NAME}.png")
     from hydrotact.viz import plot_design_convergence, render_layouts
 
-    render_layouts(spec.make_mesh(check=False), {name: load_sensor(design["sensors"][name]) for name in LAYOUTS}, output / f"{NAME}_layouts.png")
-    plot_design_convergence(design["histories"], design["start_names"], output / f"{NAME}_convergence.png", design["config"]["objective"])
+    render_layouts(spec.make_mesh(check=False), {name: load_sensor(sensors[name]) for name in LAYOUTS}, output / f"{NAME}_layouts.png")
+    histories = [h for name in DESIGNS for h in designs[name]["histories"]]
+    starts = [f"{name}: {start}" for name in DESIGNS for start in designs[name]["start_names"]]
+    plot_design_convergence(histories, starts, output / f"{NAME}_convergence.png", designs["risers"]["config"]["objective"])
     print(settings + "\n\n" + _markdown(table))
     print(f"written {output / NAME}.json, .md, .png, _layouts.png, _convergence.png, _sensor.json")
 
@@ -203,12 +221,13 @@ def _table(runs: list, scores: dict) -> list:
 
 
 def _markdown(table: list) -> str:
-    head = "| layout | design score (held out) | RMS bound (mm) | " + " | ".join(METRICS) + " |\n|---|---:|---:|" + "---:|" * len(METRICS) + "\n"
+    head = "| layout | design score (held out; pool) | RMS bound (mm) | " + " | ".join(METRICS) + " |\n|---|---:|---:|" + "---:|" * len(METRICS) + "\n"
     cell = lambda e, n: f"{e[n]['mean']:.3g} ± {e[n]['std']:.2g}" if n in e else "-"
     body = "".join(
-        f"| {e['layout']} | {e['design_held_out_score']:.4g} | {e['design_rms_bound_m'] * 1e3:.3g} | " + " | ".join(cell(e, n) for n in METRICS) + " |\n" for e in table
+        f"| {e['layout']} | {e['design_held_out_score']:.4g} ({e['design_pool']}) | {e['design_rms_bound_m'] * 1e3:.3g} | " + " | ".join(cell(e, n) for n in METRICS) + " |\n" for e in table
     )
-    return ("Design score: the mean log det of the Fisher information of (contact point, force) on the design's held-out contacts (higher is better); "
+    return ("Design score: the mean log det of the Fisher information of (contact point, force) on the held-out contacts of the design named (higher is better; "
+            "each design draws its own contacts, so scores compare within a pool); "
             "RMS bound: the Cramér–Rao bound on the localisation error. After training the binned GRU on each layout's dataset: RMSE in N (forces) and rad "
             "(angles), arc length in m, contact BCE; mean ± standard deviation over seeds.\n\n" + head + body)
 

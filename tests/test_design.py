@@ -77,6 +77,18 @@ def test_the_projection_makes_any_layout_feasible_and_an_impossible_count_is_ref
     assert board.violations(ports, board_axes) == []
     with pytest.raises(HydrotactError, match=r"cannot place 60 barometers 5 mm apart inside the elastomer .* room for \d+ at most"):
         make_feasible_region(mesh, "inside", margin=1e-3, spacing=5e-3, max_tilt_deg=70.0).random_layout(60, rng)
+    # On risers of at most 2 mm: the projection brings every port down into the 1-2 mm
+    # slab (the margin keeps them 1 mm off the board), and one above it is named.
+    risers = make_feasible_region(mesh, "inside", margin=1e-3, spacing=3e-3, max_tilt_deg=70.0, max_height=2e-3)
+    low = risers.project_positions(positions)
+    assert risers.violations(low, unit) == [] and np.all((low[:, 2] >= 1e-3 - 1e-12) & (low[:, 2] <= 2e-3))
+    assert np.any(projected[:, 2] > 2e-3) and any("mm above the board, over the 2 mm allowed" in p for p in risers.violations(projected, unit))
+    ports, riser_axes = risers.random_layout(8, rng)
+    assert risers.violations(ports, riser_axes) == [] and np.all(ports[:, 2] <= 2e-3)
+    with pytest.raises(HydrotactError, match=r"cannot place 30 barometers 3 mm apart inside the elastomer no higher than 2 mm above the board"):
+        risers.random_layout(30, rng)
+    with pytest.raises(HydrotactError, match=r"--max-height: must be a height above the board greater than the margin"):
+        make_feasible_region(mesh, "inside", margin=1e-3, spacing=3e-3, max_tilt_deg=70.0, max_height=0.5e-3)
     # A baseline layout to compare must keep the design's constraints: refused before any work.
     from hydrotact.design import DesignConfig, design_layout
 

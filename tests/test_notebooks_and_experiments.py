@@ -96,17 +96,21 @@ def test_ablation_table1_and_fine_tuning_curve_smoke(tmp_path, monkeypatch):
 def test_layout_design_smoke(tmp_path, monkeypatch):
     run_experiment(monkeypatch, "layout_design", "--smoke", "--output", tmp_path)
     report = json.loads((tmp_path / "layout_design.json").read_text())
-    scores = report["design"]["scores"]
-    assert set(scores) == {"designed", "built-in", "regular", "random"}
-    # The design improves its objective over the sensor's own layout (the climb starts there).
-    assert scores["designed"]["score"] > scores["built-in"]["score"]
+    risers, inside = (report["designs"][name]["scores"] for name in ("risers", "inside"))
+    assert set(risers) == {"designed", "built-in", "regular", "random start"} and set(inside) == {"designed-inside", "random", "built-in", "regular"}
+    # Each design improves its objective over the sensor's own layout (each climb starts there).
+    assert risers["designed"]["score"] > risers["built-in"]["score"] and inside["designed-inside"]["score"] > inside["built-in"]["score"]
+    # On risers no port stands higher than the built-in's highest.
+    from hydrotact.sensors import load_sensor
+
+    height = report["designs"]["risers"]["config"]["max_height"]
+    assert np.isclose(height, 2e-3) and np.all(load_sensor(tmp_path / "layout_design_sensor.json").taxel_positions_S[:, 2] <= height + 1e-12)
     table = {entry["layout"]: entry for entry in report["table"]}
-    for name in ("designed", "built-in", "regular", "random"):
+    for name in ("designed", "built-in", "regular", "random", "designed-inside"):
         assert all(np.isfinite(table[name][metric]["mean"]) for metric in ("theta_rmse", "phi_rmse", "arc_length_mean", "fn_rmse")), name
     # Every layout's dataset pressed the same events (the probe's path and the force it
     # felt): only the barometers, and so their readings, differ.
     from hydrotact.datasets import load_dataset
-    from hydrotact.sensors import load_sensor
 
     columns = ["probe_x", "probe_y", "probe_z", "fx", "fy", "fz", "b0"]
     designed, regular = (load_dataset(tmp_path / "layout_design.work" / f"{name}_dataset").arrays("train", columns) for name in ("designed", "regular"))

@@ -30,6 +30,7 @@ def add_parser(subparsers):
     parser.add_argument("--spacing", type=number, default=default("spacing"), metavar="M", help=f"least distance between ports, m (default {default('spacing'):g})")
     parser.add_argument("--margin", type=number, default=default("margin"), metavar="M", help=f"least distance from a port to the elastomer's boundary, m (default {default('margin'):g})")
     parser.add_argument("--max-tilt", type=number, default=default("max_tilt_deg"), metavar="DEG", help=f"largest tilt of an axis from +z (default {default('max_tilt_deg'):g})")
+    parser.add_argument("--max-height", type=number, metavar="M", help="ports on risers: the highest a port may sit above the board, m (default: anywhere inside)")
     parser.add_argument("--field-sizes", action="store_true", help="design each receptive field's size too")
     parser.add_argument("--material", type=Path, metavar="MATERIAL.json", help="the elastomer (its E(0) is used); default: elastic, --modulus")
     parser.add_argument("--modulus", type=number, metavar="E", help="elastic modulus in Pa, without --material (default 1e7, the dataset generator's)")
@@ -64,7 +65,7 @@ def run(args) -> None:
     output = check_output(args.output, suffixes=(".json",), what="the designed sensor")
     config = DesignConfig(
         objective=args.objective, contacts=args.contacts, batch=args.batch, num_rays=args.rays, relative_noise=args.relative_noise, noise_floor=args.noise_floor, noise_rms=args.noise,
-        placement=args.placement, margin=args.margin, spacing=args.spacing, max_tilt_deg=args.max_tilt, field_sizes=args.field_sizes,
+        placement=args.placement, margin=args.margin, spacing=args.spacing, max_tilt_deg=args.max_tilt, max_height=args.max_height, field_sizes=args.field_sizes,
         restarts=args.restarts, steps=args.steps, seed=args.seed,
     )
     regime = DatasetConfig() if args.probe is None else DatasetConfig(probe=args.probe)

@@ -55,7 +55,9 @@ class DesignConfig:
     cent).
 
     **Constraints:** `placement` "inside" or "board" (None: where the sensor's own
-    ports are), `margin` and `spacing` (m), `max_tilt_deg` of an axis from +z;
+    ports are), `margin` and `spacing` (m), `max_tilt_deg` of an axis from +z,
+    `max_height` the highest a port may sit above the board (m; risers; None: anywhere
+    inside);
     `field_sizes` also designs each receptive field's size (else the sensor's).
 
     **Search:** `restarts` random feasible starts (besides the sensor's own layout),
@@ -79,6 +81,7 @@ class DesignConfig:
     margin: float = 1e-3
     spacing: float = 2.5e-3
     max_tilt_deg: float = 75.0
+    max_height: float | None = None
     field_sizes: bool = False
     restarts: int = 3
     steps: int = 120
@@ -323,7 +326,7 @@ def design_layout(
     objective = DesignObjective.parse(config.objective, "objective")
     mesh = spec.make_mesh(check=False)
     placement = config.placement or (Placement.BOARD if np.allclose(spec.taxel_positions_S[:, 2], np.min(mesh.vertices[:, 2]), atol=1e-9) else Placement.INSIDE)
-    region = make_feasible_region(mesh, placement, config.margin, config.spacing, config.max_tilt_deg)
+    region = make_feasible_region(mesh, placement, config.margin, config.spacing, config.max_tilt_deg, config.max_height)
     rng = np.random.default_rng(config.seed)
     starts = [region.random_layout(count, rng) for _ in range(config.restarts)]  # refuses an impossible count first
     compare = {name: (np.asarray(p, dtype=np.float64), np.asarray(a, dtype=np.float64)) for name, (p, a) in (compare or {}).items()}
@@ -471,9 +474,10 @@ def _with_layout(spec, positions, axes, kinds, sizes, config: DesignConfig, obje
     count = len(positions)
     names = spec.taxel_names if count == spec.num_taxels else tuple(f"b{i}" for i in range(count))
     how = "D-optimal (mean log det of the Fisher information of contact point and force)" if objective == DesignObjective.D else "A-optimal (mean Cramer-Rao bound on the localisation error)"
+    risers = "" if config.max_height is None else f", at most {config.max_height * 1e3:g} mm above the board"
     description = (
         f"{spec.description} Layout designed by hydrotact design: {count} barometers, {how}, "
-        f"placement {config.placement or 'as the sensor'}, spacing {config.spacing * 1e3:g} mm, margin {config.margin * 1e3:g} mm."
+        f"placement {config.placement or 'as the sensor'}{risers}, spacing {config.spacing * 1e3:g} mm, margin {config.margin * 1e3:g} mm."
     )
     designed = dataclasses.replace(
         spec, name=f"{spec.name}_designed", description=description, taxel_names=tuple(names), taxel_positions_S=np.asarray(positions), taxel_axes_S=np.asarray(axes),

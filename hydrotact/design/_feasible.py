@@ -6,6 +6,8 @@ A layout is feasible when
 - every port lies inside the elastomer at least `margin` from its boundary (placement
   `inside`: the part's package and the silicone over it), or on the board, the
   elastomer's base plane, at least `margin` from its side walls (placement `board`);
+- with `max_height`, no port higher than that above the board (ports on risers of at
+  most that height, as on sphere8's own board);
 - every two ports are at least `spacing` apart;
 - every axis is a unit vector within `max_tilt` of the board's normal +z (it then
   reaches the skin, never the board).
@@ -83,7 +85,8 @@ def _closest_points(points, triangles):
 class FeasibleRegion:
     """The feasible layouts of one elastomer (see the module): its closed boundary
     (`vertices`, outward-wound `faces`), its `tets` (point location), `placement`,
-    `margin` and `spacing` (m), `max_tilt` (rad); `base_z` the board's height."""
+    `margin` and `spacing` (m), `max_tilt` (rad); `base_z` the board's height;
+    `max_height` the highest a port may sit above the board (m; None: no limit)."""
 
     vertices: np.ndarray
     faces: np.ndarray
@@ -93,6 +96,11 @@ class FeasibleRegion:
     spacing: float
     max_tilt: float
     base_z: float
+    max_height: float | None = None
+
+    @property
+    def _top(self) -> float:
+        return np.inf if self.max_height is None else self.base_z + self.max_height
 
     @property
     def triangles(self) -> np.ndarray:
@@ -128,7 +136,9 @@ class FeasibleRegion:
         lifted[short] = closest[short] + self.margin * (1.0 + SLACK) * self._inward[index[short]]
         if self.placement == Placement.BOARD:
             lifted[:, 2] = self.base_z
-        return lifted, bool(short.any())
+        high = lifted[:, 2] > self._top
+        lifted[high, 2] = self._top - (self._top - self.base_z) * SLACK
+        return lifted, bool(short.any() or high.any())
 
     def _push_apart(self, positions):
         moved = False
@@ -187,6 +197,8 @@ class FeasibleRegion:
             problems.append(f"barometer {int(i)} lies {clearance[i] * 1e3:.3g} mm from the elastomer's boundary, under the margin of {self.margin * 1e3:.3g} mm")
         if self.placement == Placement.BOARD:
             problems += [f"barometer {int(i)} is off the board" for i in np.flatnonzero(np.abs(positions[:, 2] - self.base_z) > 1e-9)]
+        for i in np.flatnonzero(positions[:, 2] > self._top + 1e-12):
+            problems.append(f"barometer {int(i)} sits {(positions[i, 2] - self.base_z) * 1e3:.4g} mm above the board, over the {self.max_height * 1e3:.4g} mm allowed")
         gaps = np.linalg.norm(positions[:, None] - positions[None], axis=-1) + np.diag(np.full(len(positions), np.inf))
         for i, j in zip(*np.nonzero(np.triu(gaps < self.spacing * (1.0 - 1e-6))), strict=True):
             problems.append(f"barometers {int(i)} and {int(j)} are {gaps[i, j] * 1e3:.3g} mm apart, under the spacing of {self.spacing * 1e3:.3g} mm")
@@ -217,6 +229,7 @@ class FeasibleRegion:
             pick = rng.choice(len(corners), size=count, p=volumes / volumes.sum())
             weights = rng.dirichlet(np.ones(4), size=count)
             points = np.einsum("nk,nki->ni", weights, corners[pick])
+        points = points[points[:, 2] <= self._top]
         _, distances, _ = calc_closest_points(self._lifted(points), self.triangles)
         return points[distances >= self.margin * (1.0 + SLACK)]
 
@@ -242,15 +255,19 @@ class FeasibleRegion:
                         return np.array(chosen), self.random_axes(count, rng)
             most = max(most, len(chosen))
         where = "on the board" if self.placement == Placement.BOARD else "inside the elastomer"
+        if self.max_height is not None and self.placement != Placement.BOARD:
+            where += f" no higher than {self.max_height * 1e3:.4g} mm above the board"
         raise HydrotactError(
             f"cannot place {count} barometers {self.spacing * 1e3:.3g} mm apart {where} at least {self.margin * 1e3:.3g} mm from its boundary: "
             f"random packing found room for {most} at most; ask for fewer barometers, a smaller spacing or a smaller margin"
         )
 
 
-def make_feasible_region(mesh, placement, margin: float, spacing: float, max_tilt_deg: float) -> FeasibleRegion:
+def make_feasible_region(mesh, placement, margin: float, spacing: float, max_tilt_deg: float, max_height: float | None = None) -> FeasibleRegion:
     """The FeasibleRegion of a sensor's tet mesh (checked numbers)."""
     placement = Placement.parse(placement, "placement")
+    if max_height is not None and not (np.isfinite(max_height) and max_height > margin):
+        raise HydrotactError(f"--max-height: must be a height above the board greater than the margin ({margin:g} m), got {max_height!r} m")
     for name, value in (("margin", margin), ("spacing", spacing)):
         if not np.isfinite(value) or value < 0.0:
             raise HydrotactError(f"--{name}: must be a non-negative length, got {value!r} m")
@@ -260,4 +277,5 @@ def make_feasible_region(mesh, placement, margin: float, spacing: float, max_til
     return FeasibleRegion(
         vertices=vertices, faces=np.asarray(mesh.boundary_faces), tets=np.asarray(mesh.tets), placement=placement,
         margin=float(margin), spacing=float(spacing), max_tilt=float(np.radians(max_tilt_deg)), base_z=float(vertices[:, 2].min()),
+        max_height=None if max_height is None else float(max_height),
     )
