@@ -245,7 +245,7 @@ def _plot(table: list, path: Path) -> None:
             means = [e[name]["mean"] * scale if name in e else np.nan for e in table]
             spread = [e[name]["std"] * scale if name in e else 0.0 for e in table]
             axis.bar(x + (k - len(names) / 2 + 0.5) * 0.8 / len(names), means, 0.8 / len(names), yerr=spread, capsize=2, label=name.removesuffix("_rmse").removesuffix("_mean"))
-        axis.set_xticks(x, [e["layout"] for e in table], fontsize=8)
+        axis.set_xticks(x, [e["layout"] for e in table], fontsize=8, rotation=20, ha="right")
         axis.set_ylabel(label)
         axis.legend(fontsize=7)
     figure.suptitle("The binned GRU trained on each layout's dataset (mean and spread over seeds)", fontsize=9)
