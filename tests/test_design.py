@@ -89,8 +89,11 @@ def test_the_projection_makes_any_layout_feasible_and_an_impossible_count_is_ref
         risers.random_layout(30, rng)
     with pytest.raises(HydrotactError, match=r"--max-height: must be a height above the board greater than the margin"):
         make_feasible_region(mesh, "inside", margin=1e-3, spacing=3e-3, max_tilt_deg=70.0, max_height=0.5e-3)
-    # A baseline layout to compare must keep the design's constraints: refused before any work.
     from hydrotact.design import DesignConfig, design_layout
+
+    with pytest.raises(HydrotactError, match=r"--max-height: must be a height above the board in m, got '2mm'"):
+        DesignConfig(max_height="2mm")
+    # A baseline layout to compare must keep the design's constraints: refused before any work.
 
     with pytest.raises(HydrotactError, match=r"compare\['hand-made'\]: the layout breaks the design's constraints: barometer \d+"):
         design_layout(sphere8[0], config=DesignConfig(contacts=8, restarts=1, steps=1), compare={"hand-made": (positions, unit)})

@@ -92,6 +92,8 @@ class DesignConfig:
                 raise HydrotactError(f"--{name.replace('_', '-')}: must be a {'positive' if rate else 'non-negative'} number, got {value!r}")
         if self.noise_rms is not None and not (np.isfinite(self.noise_rms) and self.noise_rms >= 0.0):
             raise HydrotactError(f"--noise: must be a non-negative pressure in Pa, got {self.noise_rms!r}")
+        if self.max_height is not None and (isinstance(self.max_height, bool) or not isinstance(self.max_height, int | float | np.floating) or not np.isfinite(self.max_height)):
+            raise HydrotactError(f"--max-height: must be a height above the board in m, got {self.max_height!r}")
 
     def to_json(self) -> dict:
         return dataclasses.asdict(self)
