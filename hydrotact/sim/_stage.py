@@ -24,6 +24,7 @@ project does not ship.
 import dataclasses
 from pathlib import Path
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -104,7 +105,7 @@ def find_contact_heights(model, probe, sites_xy, iterations: int = 30) -> np.nda
 
     **Returns:** (S,) z in frame S, m.
     """
-    from ..contact import calc_contact_surface, compute_contact_surface, make_pose, map_over_poses
+    from ..contact import compute_contact_surface, make_pose
 
     sites_xy = np.asarray(sites_xy, dtype=np.float64)
     top = float(np.max(np.asarray(model.field.vertices)[:, 2]))
@@ -118,16 +119,28 @@ def find_contact_heights(model, probe, sites_xy, iterations: int = 30) -> np.nda
     # The deepest poses size the buffers; every shallower one then fits in them.
     surface, capacity = compute_contact_surface(model.field, probe, poses(low), clusters=model.clusters)
     at_low = np.asarray(surface.total_area) > 0.0
-    touching = jax.jit(lambda X: map_over_poses(lambda one: calc_contact_surface(model.field, probe, one, capacity, model.clusters).total_area > 0.0, X))
-    at_high = np.asarray(touching(poses(high)))
+
+    def touching(X):
+        return np.asarray(_touching(model.field, probe, capacity, model.clusters, X))
+
+    at_high = touching(poses(high))
     if not np.all(at_low) or np.any(at_high):
         bad = int(np.flatnonzero(~at_low | at_high)[0])
         raise HydrotactError(f"stage session: site {bad + 1} at ({1e3 * sites_xy[bad, 0]:g}, {1e3 * sites_xy[bad, 1]:g}) mm is not above the skin")
     for _ in range(iterations):
         middle = 0.5 * (low + high)
-        hit = np.asarray(touching(poses(middle)))
+        hit = touching(poses(middle))
         low, high = np.where(hit, middle, low), np.where(hit, high, middle)
     return 0.5 * (low + high)
+
+
+@eqx.filter_jit
+def _touching(field, probe, capacity, clusters, poses):
+    """Whether the probe touches the skin at each pose (compiled once per shapes and
+    capacity, not once per call of :func:`find_contact_heights`)."""
+    from ..contact import calc_contact_surface, map_over_poses
+
+    return map_over_poses(lambda one: calc_contact_surface(field, probe, one, capacity, clusters).total_area > 0.0, poses)
 
 
 def _stage_plan(session: StageSession, onsets_travel: np.ndarray, rng, rate_hz: float):
