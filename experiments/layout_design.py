@@ -73,8 +73,7 @@ def make_regular_layout(spec, region) -> tuple[np.ndarray, np.ndarray]:
     (half the elastomer's footprint radius, at the built-in layout's mean height),
     each facing outwards at RING_TILT_DEG; projected onto `region`'s constraints."""
     count = spec.num_taxels
-    mesh = spec.make_mesh(check=False)
-    lo, hi = np.min(mesh.vertices, axis=0), np.max(mesh.vertices, axis=0)
+    lo, hi = np.min(region.vertices, axis=0), np.max(region.vertices, axis=0)  # the elastomer's own mesh
     centre = 0.5 * (lo + hi)
     radius = 0.25 * min(hi[0] - lo[0], hi[1] - lo[1])
     height = float(np.mean(spec.taxel_positions_S[:, 2]))
@@ -96,14 +95,15 @@ def _design(spec, args, smoke: bool, work: Path, material: dict, design: str) ->
     kept = work / f"design_{design}.json"
     if kept.is_file():
         return json.loads(kept.read_text())
-    max_height = float(np.max(spec.taxel_positions_S[:, 2]) - np.min(spec.make_mesh(check=False).vertices[:, 2])) if design == "risers" else None
+    mesh = spec.make_mesh(check=False)
+    max_height = float(np.max(spec.taxel_positions_S[:, 2]) - np.min(mesh.vertices[:, 2])) if design == "risers" else None
     if smoke:
         config = DesignConfig(contacts=8, num_rays=8, restarts=1, steps=6, max_height=max_height)
         regime = DatasetConfig(probe=SMOKE_REGIME["probe"])
     else:
         config = DesignConfig(contacts=args.design_contacts, batch=args.design_batch, num_rays=8, restarts=args.design_restarts, steps=args.design_steps, max_height=max_height)
         regime = DatasetConfig(probe=args.design_probe)
-    region = make_feasible_region(spec.make_mesh(check=False), "inside", config.margin, config.spacing, config.max_tilt_deg, max_height)
+    region = make_feasible_region(mesh, "inside", config.margin, config.spacing, config.max_tilt_deg, max_height)
     regular = make_regular_layout(spec, region)
     result = design_layout(spec, config=config, regime=regime, material=material, compare={"regular": regular}, checkpoint=work / f"design_{design}.partial", progress=not smoke)
     random_index = result.start_names.index("random 0")
