@@ -19,6 +19,9 @@ from hydrotact.design import (
     calc_closest_points,
     calc_design_score,
     calc_layout_information,
+    calc_neighbour_errors,
+    calc_neighbour_score,
+    calc_neighbour_targets,
     calc_prior_precision,
     draw_design_contacts,
     make_feasible_region,
@@ -131,6 +134,43 @@ def test_contacts_reach_their_forces_and_the_information_changes_variables_exact
     )
 
 
+def test_the_neighbour_estimator_meets_its_closed_forms(linearised):
+    _, _, noise, _ = linearised
+    rng = np.random.default_rng(3)
+    points = rng.normal(size=(40, 3)) * 1e-3
+    # Readings that say nothing (all equal, or all past the channel's limit): every other
+    # contact weighs the same, so each estimate is the mean of the others.
+    others = (points.sum(axis=0) - points) / (len(points) - 1)
+    expected = np.sum((others - points) ** 2, axis=1)
+    for readings in (np.full((40, 3), 500.0), np.asarray(noise.limit) + rng.uniform(1.0, 1e4, size=(40, 3))):
+        np.testing.assert_allclose(np.asarray(calc_neighbour_errors(jnp.asarray(readings), jnp.asarray(points), noise)), expected, rtol=1e-12)
+    # Readings that tell the contacts apart, evenly in the estimator's features
+    # (asinh(y / s), s the noise at zero), on a line 0.05 mm apart: inside, the
+    # neighbours weigh alike on both sides and the estimate is exact; at the ends they
+    # lie on one side, a few spacings off.
+    line = np.column_stack([np.linspace(0.0, 10e-3, 201), np.zeros(201), np.zeros(201)])
+    scale = float(jnp.sqrt(noise.variances(0.0)))
+    readings = jnp.asarray(scale * np.sinh(np.column_stack([0.7e3 * line[:, 0], 0.7e3 * (10e-3 - line[:, 0])])))
+    errors = np.sqrt(np.asarray(calc_neighbour_errors(readings, jnp.asarray(line), noise)))
+    assert np.max(errors[20:-20]) < 1e-9 and 0.05e-3 < np.max(errors) < 0.3e-3 and np.median(errors) < 1e-9
+    # From a separate reference pool nothing is left out: a query reading as pool member 0
+    # does, the other five reading alike far away, weighs its twin 1 and each of the
+    # five (at the fifth-nearest distance, the width) exp(-1).
+    pool = jnp.asarray(np.vstack([[10.0, 10.0], np.tile([1e4, 5e3], (5, 1))]))
+    where = rng.normal(size=(6, 3)) * 1e-3
+    query = where[0] + 1e-3
+    estimate = (where[0] + np.exp(-1.0) * where[1:].sum(axis=0)) / (1.0 + 5.0 * np.exp(-1.0))
+    error = calc_neighbour_errors(pool[:1], jnp.asarray(query[None]), noise, pool, jnp.asarray(where))
+    np.testing.assert_allclose(float(error[0]), np.sum((estimate - query) ** 2), rtol=1e-9)
+    # What is estimated: on a sensor with contact angles, (θ, φ) as arcs at the mean
+    # radius (the top of a 10 mm dome about (0, 0, 5 mm) is θ = φ = 0; a point on +x at
+    # the centre's height is φ = 90 deg; one on -y is θ = 90 deg); else the points.
+    centre = np.array([0.0, 0.0, 5e-3])
+    skin = centre + 10e-3 * np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+    np.testing.assert_allclose(np.asarray(calc_neighbour_targets(skin, centre)), 10e-3 * np.array([[0.0, 0.0], [0.0, np.pi / 2], [np.pi / 2, 0.0]]), atol=1e-15)
+    np.testing.assert_array_equal(np.asarray(calc_neighbour_targets(skin)), skin)
+
+
 def test_the_objective_gradients_match_finite_differences(linearised):
     model, contacts, noise, prior = linearised
     contacts = jax.tree_util.tree_map(lambda a: a[:4] if np.ndim(a) else a, contacts)  # four contacts: one compilation, small
@@ -138,13 +178,14 @@ def test_the_objective_gradients_match_finite_differences(linearised):
 
     def scores(positions, axes):
         layout = model.layout.__class__(positions, axes, model.layout.field_sizes, model.layout.is_cone)
-        information = calc_layout_information(layout, contacts, noise, 8, capacity).information
-        return jnp.stack([calc_design_score(information, prior, DesignObjective(name)) for name in ("d", "a")])
+        sampled = calc_layout_information(layout, contacts, noise, 8, capacity)
+        scores = [calc_design_score(sampled.information, prior, DesignObjective(name)) for name in ("d", "a")]
+        return jnp.stack([*scores, calc_neighbour_score(sampled.readings, contacts.points_S, noise)])
 
     jacobian = jax.jit(jax.jacrev(scores, argnums=(0, 1)))
     value = jax.jit(scores)
     positions, axes = model.layout.positions_S, model.layout.axes_S
-    j_positions, j_axes = (np.asarray(j) for j in jacobian(positions, axes))  # (2, taxels, 3) each
+    j_positions, j_axes = (np.asarray(j) for j in jacobian(positions, axes))  # (3, taxels, 3) each
     assert np.any(j_positions != 0.0) and np.any(j_axes != 0.0)
     checked = 0
     for taxel, k in [(0, 2), (1, 0), (3, 1), (6, 2)]:
@@ -153,12 +194,12 @@ def test_the_objective_gradients_match_finite_differences(linearised):
             plus = value(positions + step, axes) if which == 0 else value(positions, axes + step)
             minus = value(positions - step, axes) if which == 0 else value(positions, axes - step)
             fd = np.asarray(plus - minus) / (2 * h)
-            for objective in range(2):
+            for objective in range(3):
                 ad = float(gradient[objective, taxel, k])
                 scale = max(abs(ad), 1e-3 * float(np.abs(gradient[objective]).max()))
-                assert abs(fd[objective] - ad) <= 2e-3 * scale, ("da"[objective], taxel, k, fd[objective], ad)
+                assert abs(fd[objective] - ad) <= 2e-3 * scale, ("dak"[objective], taxel, k, fd[objective], ad)
                 checked += abs(ad) > 0.0
-    assert checked >= 8
+    assert checked >= 12
 
 
 def test_design_command_writes_a_feasible_sensor_that_beats_the_built_in_and_resumes(tmp_path, capsys, sphere8, monkeypatch):

@@ -10,6 +10,14 @@ from pathlib import Path
 from ._arguments import number
 from ._output import print_report
 
+PER_CONTACT = ("localisation_bounds", "neighbour_errors")
+"""LayoutScore's per-contact arrays: in the pictures, not in the report."""
+OBJECTIVES = {
+    "d": "D-optimal (mean log det, higher is better)",
+    "a": "A-optimal (minus mean CRB, mm^2, higher is better)",
+    "k": "learned (minus mean squared nearest-neighbour error, mm^2, higher is better)",
+}
+
 
 def add_parser(subparsers):
     from ..design import DesignConfig
@@ -18,14 +26,17 @@ def add_parser(subparsers):
     default = lambda name: d[name].default
     parser = subparsers.add_parser(
         "design", help="design where the barometers go and how they face, by gradient of the information their readings carry",
-        description="Maximises the information the barometers' readings carry about where a contact is and how hard it presses "
-        "(D-optimal, or the A-optimal Cramer-Rao bound on localisation), over contacts of the dataset regime, from several feasible "
+        description="Maximises what the barometers' readings say about where a contact is and how hard it presses "
+        "(D-optimal information, the A-optimal Cramer-Rao bound on localisation, or the localisation error of an estimator learned "
+        "from the readings), over contacts of the dataset regime, from several feasible "
         "starts, under the constraints (inside the elastomer or on the board, a margin, a spacing, unit axes within a tilt). "
         "Writes the designed sensor JSON, before/after renders, the convergence and a map of the predicted localisation error.",
     )
     parser.add_argument("--sensor", required=True, metavar="S", help="a built-in sensor (pad5x5, sphere8, ellipsoid8) or a sensor JSON file")
     parser.add_argument("--barometers", type=int, metavar="N", help="how many barometers (default: as many as the sensor has)")
-    parser.add_argument("--objective", default=default("objective"), choices=["d", "a"], help="d: information volume (D-optimal, default); a: localisation bound (A-optimal)")
+    parser.add_argument("--objective", default=default("objective"), choices=["d", "a", "k"],
+                        help="d: information volume (D-optimal); a: localisation bound (A-optimal); k: the leave-one-out localisation error of a "
+                        "nearest-neighbour estimator learned from the readings (ranks layouts as a trained estimator does) (default: %(default)s)")
     parser.add_argument("--placement", choices=["inside", "board"], help="ports inside the elastomer or on the board (default: where the sensor's are)")
     parser.add_argument("--spacing", type=number, default=default("spacing"), metavar="M", help=f"least distance between ports, m (default {default('spacing'):g})")
     parser.add_argument("--margin", type=number, default=default("margin"), metavar="M", help=f"least distance from a port to the elastomer's boundary, m (default {default('margin'):g})")
@@ -78,8 +89,8 @@ def run(args) -> None:
     scores = {"designed": design.designed} | ({"built-in": design.builtin} if design.builtin is not None else {})
     report_document = {
         "sensor": design.start_spec.name, "designed_sensor": str(output), "config": design.config.to_json(), "regime": design.regime.to_json(),
-        "scores": {name: {k: v for k, v in dataclasses.asdict(s).items() if k != "localisation_bounds"} for name, s in scores.items()},
-        "random_starts": [{k: v for k, v in dataclasses.asdict(s).items() if k != "localisation_bounds"} for s in design.random],
+        "scores": {name: {k: v for k, v in dataclasses.asdict(s).items() if k not in PER_CONTACT} for name, s in scores.items()},
+        "random_starts": [{k: v for k, v in dataclasses.asdict(s).items() if k not in PER_CONTACT} for s in design.random],
         "elapsed_s": design.elapsed_s,
     }
     write_text_atomic(f"{stem}_report.json", json.dumps(report_document, indent=2) + "\n")
@@ -90,17 +101,20 @@ def run(args) -> None:
         before = "built-in" if design.builtin is not None else "start"
         render_layouts(design.start_spec.make_mesh(check=False), {before: design.start_spec, "designed": design.spec}, f"{stem}_layouts.png")
         plot_design_convergence(design.histories, design.start_names, f"{stem}_convergence.png", design.config.objective)
-        plot_localisation_maps(design.held_out_points_S, {name: s.localisation_bounds for name, s in reversed(scores.items())}, design.start_spec, f"{stem}_error_map.png")
+        learned = design.config.objective == "k"
+        errors = {name: s.neighbour_errors if learned else s.localisation_bounds for name, s in reversed(scores.items())}
+        plot_localisation_maps(design.held_out_points_S, errors, design.start_spec, f"{stem}_error_map.png", "nearest-neighbour estimator" if learned else "Cramér–Rao bound")
         pictures = [f"{stem}_layouts.png", f"{stem}_convergence.png", f"{stem}_error_map.png"]
     best_random = max(design.random, key=lambda s: s.held_out_score) if design.random else None
     report = {
         "designed_sensor": str(output),
         "barometers": design.spec.num_taxels,
-        "objective": "D-optimal (mean log det, higher is better)" if config.objective == "d" else "A-optimal (minus mean CRB, mm^2, higher is better)",
+        "objective": OBJECTIVES[config.objective],
         "designed_score": f"{design.designed.score:.5g} (held out {design.designed.held_out_score:.5g})",
         "built_in_score": "n/a (other count)" if design.builtin is None else f"{design.builtin.score:.5g} (held out {design.builtin.held_out_score:.5g})",
         "best_random_score": "none" if best_random is None else f"{best_random.score:.5g} (held out {best_random.held_out_score:.5g})",
         "rms_localisation_bound_mm": f"{design.designed.rms_bound * 1e3:.3g}" + ("" if design.builtin is None else f" (built-in {design.builtin.rms_bound * 1e3:.3g})"),
+        "rms_neighbour_error_mm": f"{design.designed.rms_neighbour_error * 1e3:.3g}" + ("" if design.builtin is None else f" (built-in {design.builtin.rms_neighbour_error * 1e3:.3g})"),
         "elapsed_s": design.elapsed_s,
         "report": f"{stem}_report.json",
         "pictures": ", ".join(pictures) or "none",

@@ -20,21 +20,30 @@ from .._errors import HydrotactError
 from .._files import atomic_path
 from ..taxel import make_taxel_layout
 from ._feasible import Placement, make_feasible_region
-from ._objective import DesignObjective, NoiseModel, calc_prior_precision
+from ._objective import DesignObjective, NoiseModel, calc_neighbour_targets, calc_prior_precision
 from ._search import POSITION_UNIT, START_TAXEL_CAPACITY, _climb, _make_scorer, _score_layout, _size_units  # _climb looked up here: the tests replace it
+
+OBJECTIVE_DESCRIPTIONS = {
+    DesignObjective.D: "D-optimal (mean log det of the Fisher information of contact point and force)",
+    DesignObjective.A: "A-optimal (mean Cramer-Rao bound on the localisation error)",
+    DesignObjective.K: "learned (mean leave-one-out localisation error of a nearest-neighbour estimator)",
+}
 
 
 @dataclasses.dataclass(frozen=True)
 class DesignConfig:
     """How a layout is designed (every field is written into the result).
 
-    **Objective:** `objective` "d" (D-optimal, the default) or "a" (A-optimal, the
-    localisation bound); `contacts` drawn for the design (a pool: each step's gradient
-    is over a fresh minibatch of `batch` of them, and every `eval_every` steps the
-    whole pool is scored, the best layout so far kept; a design fitted to a few fixed
-    contacts fits them, not the skin: measured on sphere8 with 24, the designed layout
-    gained 4.4 on its contacts and lost 2.2 against the built-in on held-out ones) and
-    as many again held out;
+    **Objective:** `objective` "k" (learned, the default: the localisation error of a
+    nearest-neighbour estimator learned from the contacts' readings, which ranked
+    trained estimators' errors where the bounds did not; see :mod:`._objective`), "d"
+    (D-optimal) or "a" (A-optimal, the localisation bound); `contacts` drawn for the
+    design (a pool: for "d" and "a" each step's gradient is over a fresh minibatch of
+    `batch` of them, and every `eval_every` steps the whole pool is scored, the best
+    layout so far kept; a design fitted to a few fixed contacts fits them, not the
+    skin: measured on sphere8 with 24, the designed layout gained 4.4 on its contacts
+    and lost 2.2 against the built-in on held-out ones; "k" uses the whole pool every
+    step, each contact the others' neighbour) and as many again held out;
     `num_rays` per receptive field; the noise (:class:`NoiseModel`): `noise_rms` (Pa,
     None: the part's), `noise_floor` (Pa) for a cast barometer's drift, creep and
     hysteresis (our choice, not measured on real logs) and `relative_noise` the part
@@ -56,7 +65,7 @@ class DesignConfig:
     without a gain; `seed` of every draw.
     """
 
-    objective: str = "d"
+    objective: str = "k"
     contacts: int = 192
     batch: int = 32
     eval_every: int = 10
@@ -102,13 +111,18 @@ class DesignConfig:
 @dataclasses.dataclass(frozen=True)
 class LayoutScore:
     """A layout's `score` on the design's contacts and `held_out_score` on the held-out
-    ones (higher is better; see :func:`calc_design_score`), its `localisation_bounds`
-    (m, per held-out contact) and their root mean square `rms_bound` (m)."""
+    ones (higher is better; the design's objective), its `localisation_bounds` (m, per
+    held-out contact: the Cramér–Rao bound) and their root mean square `rms_bound`
+    (m), and its `neighbour_errors` (m, per held-out contact: a nearest-neighbour
+    estimator's, learned from the other held-out contacts) and their root mean square
+    `rms_neighbour_error` (m); both error models whatever the objective."""
 
     score: float
     held_out_score: float
     localisation_bounds: np.ndarray
     rms_bound: float
+    neighbour_errors: np.ndarray
+    rms_neighbour_error: float
 
 
 @dataclasses.dataclass(frozen=True)
@@ -216,6 +230,8 @@ def design_layout(
     both, skin_area = draw_design_contacts(spec, model, regime, modulus_pa, 2 * config.contacts, rng)
     contacts = jax.tree_util.tree_map(lambda a: a[: config.contacts] if np.ndim(a) else a, both)
     held_out = jax.tree_util.tree_map(lambda a: a[config.contacts :] if np.ndim(a) else a, both)
+    targets = calc_neighbour_targets(both.points_S, spec.contact_center_S)  # the learned objective's (and the reported error's)
+    targets, held_out_targets = targets[: config.contacts], targets[config.contacts :]
     part = spec.part
     noise = NoiseModel(
         noise_rms=jnp.asarray(float(part.noise_rms_pa if config.noise_rms is None else config.noise_rms)),
@@ -233,9 +249,10 @@ def design_layout(
 
     def score(positions, axes, sizes_, capacity):
         layout = make_taxel_layout(positions, axes, kinds, sizes_)
-        value, _, capacity = _score_layout(layout, contacts, noise, prior, objective, config.num_rays, capacity)
-        held, bounds, capacity = _score_layout(layout, held_out, noise, prior, objective, config.num_rays, capacity)
-        return LayoutScore(value, held, bounds, float(np.sqrt(np.mean(bounds**2)))), capacity
+        value, _, _, capacity = _score_layout(layout, contacts, targets, noise, prior, objective, config.num_rays, capacity)
+        held, bounds, neighbour, capacity = _score_layout(layout, held_out, held_out_targets, noise, prior, objective, config.num_rays, capacity)
+        rms = lambda errors: float(np.sqrt(np.mean(errors**2)))
+        return LayoutScore(value, held, bounds, rms(bounds), neighbour, rms(neighbour)), capacity
 
     capacity = START_TAXEL_CAPACITY
     named = [(f"random {i}", positions, axes) for i, (positions, axes) in enumerate(starts)]
@@ -252,12 +269,14 @@ def design_layout(
     for name, (positions, axes) in compare.items():
         compared[name], capacity = score(positions, axes, sizes, capacity)
 
-    scorer = _make_scorer(contacts, noise, prior, objective, config.num_rays)
+    scorer = _make_scorer(contacts, targets, noise, prior, objective, config.num_rays)
+    # The learned objective needs every contact each step (each is the others' neighbour).
+    climbing = dataclasses.replace(config, batch=config.contacts) if objective == DesignObjective.K else config
 
     def pool_score(params):
         nonlocal capacity
         layout = make_taxel_layout(np.asarray(params[0]) * POSITION_UNIT, np.asarray(params[1]), kinds, np.asarray(params[2]) * np.asarray(_size_units(template)))
-        value, _, capacity = _score_layout(layout, contacts, noise, prior, objective, config.num_rays, capacity)
+        value, _, _, capacity = _score_layout(layout, contacts, targets, noise, prior, objective, config.num_rays, capacity)
         return value
 
     results, histories = [], []
@@ -278,7 +297,7 @@ def design_layout(
             else:
                 start_rng = np.random.default_rng([config.seed, len(results)])  # the same minibatches whether resumed or not
                 best_positions, best_axes, best_sizes, history, capacity = _climb(
-                    region, scorer, pool_score, template, positions, axes, sizes, config, capacity, start_rng, on_step
+                    region, scorer, pool_score, template, positions, axes, sizes, climbing, capacity, start_rng, on_step
                 )
                 if kept is not None:
                     with atomic_path(kept, suffix=".npz") as tmp:
@@ -344,7 +363,7 @@ def _with_layout(spec, positions, axes, kinds, sizes, config: DesignConfig, obje
 
     count = len(positions)
     names = spec.taxel_names if count == spec.num_taxels else tuple(f"b{i}" for i in range(count))
-    how = "D-optimal (mean log det of the Fisher information of contact point and force)" if objective == DesignObjective.D else "A-optimal (mean Cramer-Rao bound on the localisation error)"
+    how = OBJECTIVE_DESCRIPTIONS[objective]
     risers = "" if config.max_height is None else f", at most {config.max_height * 1e3:g} mm above the board"
     description = (
         f"{spec.description} Layout designed by hydrotact design: {count} barometers, {how}, "

@@ -11,7 +11,7 @@ import numpy as np
 from .._buffers import run_growing
 from ..taxel import TaxelCapacity
 from ._feasible import FeasibleRegion
-from ._objective import calc_design_score, calc_layout_information, calc_localisation_bounds
+from ._objective import DesignObjective, calc_design_score, calc_layout_information, calc_layout_readings, calc_localisation_bounds, calc_neighbour_errors, calc_neighbour_score
 
 POSITION_UNIT = 1e-3
 """Ports (and disk radii) are optimised in millimetres."""
@@ -59,7 +59,7 @@ def _take(contacts, indices):
     return jax.tree_util.tree_map(take, contacts)
 
 
-def _make_scorer(contacts, noise, prior, objective, num_rays):
+def _make_scorer(contacts, targets, noise, prior, objective, num_rays):
     """(capacity, template, params, indices) -> _Scored: the score over the contacts
     `indices` and its gradients in the params (positions in mm, raw axes, field
     sizes), jitted once per capacity."""
@@ -69,7 +69,11 @@ def _make_scorer(contacts, noise, prior, objective, num_rays):
         if capacity not in cache:
 
             def score(params, template, indices):
-                information = calc_layout_information(_layout(template, *params), _take(contacts, indices), noise, num_rays, capacity)
+                chosen = _take(contacts, indices)
+                if objective == DesignObjective.K:  # readings only: each contact is the others' neighbour
+                    sampled = calc_layout_readings(_layout(template, *params), chosen, num_rays, capacity)
+                    return calc_neighbour_score(sampled.readings, jnp.asarray(targets)[indices], noise), sampled
+                information = calc_layout_information(_layout(template, *params), chosen, noise, num_rays, capacity)
                 return calc_design_score(information.information, prior, objective), information
 
             @eqx.filter_jit
@@ -89,10 +93,16 @@ def _grown(compute, capacity):
     return result, fitted.rounded_up()
 
 
-def _score_layout(layout, contacts, noise, prior, objective, num_rays, capacity):
+def _score_layout(layout, contacts, targets, noise, prior, objective, num_rays, capacity):
+    """(score, each contact's Cramér–Rao bound (m), each contact's leave-one-out
+    nearest-neighbour error (m), capacity): both error models, whatever the objective."""
     information, capacity = _grown(lambda c: _information_kernel(layout, contacts, noise, num_rays, c), capacity)
-    value = float(calc_design_score(information.information, prior, objective))
-    return value, np.asarray(calc_localisation_bounds(information.information, prior)), capacity
+    if objective == DesignObjective.K:
+        value = float(calc_neighbour_score(information.readings, targets, noise))
+    else:
+        value = float(calc_design_score(information.information, prior, objective))
+    neighbour = np.sqrt(np.asarray(calc_neighbour_errors(information.readings, targets, noise)))
+    return value, np.asarray(calc_localisation_bounds(information.information, prior)), neighbour, capacity
 
 
 @eqx.filter_jit

@@ -56,15 +56,16 @@ def plot_design_convergence(histories, names, path, objective: str) -> None:
         history = np.asarray(history)
         ax.plot(history[:, 0], history[:, 1], marker=".", lw=2.2 if index == best else 1.0, label=f"{name}{' (best)' if index == best else ''}")
     ax.set_xlabel("step")
-    ax.set_ylabel("mean log det(I + I0)" if objective == "d" else "-(mean CRB of localisation), mm^2")
+    labels = {"d": "mean log det(I + I0)", "a": "-(mean CRB of localisation), mm^2", "k": "-(mean nearest-neighbour error^2), mm^2"}
+    ax.set_ylabel(labels[objective])
     ax.set_title("layout design: the score on the design's contacts")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     save_figure(figure, path)
 
 
-def plot_localisation_maps(points_S, bounds: dict, spec, path) -> None:
-    """The Cramér–Rao bound on the localisation error (mm) at each held-out contact,
+def plot_localisation_maps(points_S, bounds: dict, spec, path, what: str = "Cramér–Rao bound") -> None:
+    """The predicted localisation error (mm; `what`: its model) at each held-out contact,
     one panel per named layout, on one colour scale: over the contact angles (phi,
     theta) where the sensor defines them, over (x, y) otherwise."""
     points = np.asarray(points_S)
@@ -85,6 +86,6 @@ def plot_localisation_maps(points_S, bounds: dict, spec, path) -> None:
         ax.set_xlabel(labels[0])
         ax.set_ylabel(labels[1])
         ax.set_aspect("equal")
-    figure.colorbar(shown, ax=axes[0].tolist(), label="localisation bound (CRB) [mm]")
+    figure.colorbar(shown, ax=axes[0].tolist(), label=f"localisation error, {what} [mm]")
     figure.suptitle("predicted localisation error over the skin (held-out contacts)")
     save_figure(figure, path)
