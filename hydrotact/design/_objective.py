@@ -36,8 +36,10 @@ knows the map only at its training contacts, and between them it interpolates. O
 sphere8's layouts the bound did not rank the trained binned GRU's localisation errors
 (the layout with the lowest bound, 3.4 mm, trained to 4.5 mm, behind the built-in's
 4.3 mm at a bound of 5.0 mm), while the leave-one-out error of a five-nearest-neighbour
-estimator on a few hundred static presses ranked all five layouts as the GRU did, on
-θ, φ and arc length (experiments/layout_design.py; benchmarks/RESULTS.md). Hence
+estimator on 384 static presses ranked the five layouts' trained arc lengths in order,
+and the same estimator run on each layout's dataset ranked their trained θ RMSE in
+order (experiments/layout_design.py; benchmarks/RESULTS.md): the trained estimator
+sits on what its training presses let any learner reach. Hence
 
 - **learned** (`k`): the mean over contacts of the squared error (mm²) of a soft
   five-nearest-neighbour estimate of where the contact is, learned from the other
