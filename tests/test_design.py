@@ -96,6 +96,8 @@ def test_the_projection_makes_any_layout_feasible_and_an_impossible_count_is_ref
 
     with pytest.raises(HydrotactError, match=r"--max-height: must be a height above the board in m, got '2mm'"):
         DesignConfig(max_height="2mm")
+    with pytest.raises(HydrotactError, match=r"--balance: must be a number of at least 1 \(1 sums the target's components' errors\), got 0.5"):
+        DesignConfig(balance=0.5)
     # A baseline layout to compare must keep the design's constraints: refused before any work.
 
     with pytest.raises(HydrotactError, match=r"compare\['hand-made'\]: the layout breaks the design's constraints: barometer \d+"):
@@ -144,6 +146,15 @@ def test_the_neighbour_estimator_meets_its_closed_forms(linearised):
     expected = np.sum((others - points) ** 2, axis=1)
     for readings in (np.full((40, 3), 500.0), np.asarray(noise.limit) + rng.uniform(1.0, 1e4, size=(40, 3))):
         np.testing.assert_allclose(np.asarray(calc_neighbour_errors(jnp.asarray(readings), jnp.asarray(points), noise)), expected, rtol=1e-12)
+    # The score weighs the components' mean squared errors by a p-norm: p = 1 sums them
+    # (minus the mean squared error, mm²), a large p tends to the worst component's.
+    readings, stretched = jnp.full((40, 3), 500.0), points * np.array([1.0, 3.0, 0.5])
+    per_component = np.mean(((stretched.sum(axis=0) - stretched) / 39 - stretched) ** 2, axis=0) * 1e6
+    np.testing.assert_allclose(np.asarray(calc_neighbour_errors(readings, jnp.asarray(stretched), noise, per_component=True)).mean(axis=0) * 1e6, per_component, rtol=1e-12)
+    for balance, expected_score in ((1.0, -per_component.sum()), (4.0, -np.sum(per_component**4) ** 0.25), (50.0, -per_component.max())):
+        np.testing.assert_allclose(float(calc_neighbour_score(readings, jnp.asarray(stretched), noise, balance)), expected_score, rtol=1e-6 if balance == 50.0 else 1e-12)
+    whole = np.mean(np.sum(((stretched.sum(axis=0) - stretched) / 39 - stretched) ** 2, axis=1)) * 1e6
+    np.testing.assert_allclose(float(calc_neighbour_score(readings, jnp.asarray(stretched), noise)), -whole, rtol=1e-12)
     # Readings that tell the contacts apart, evenly in the estimator's features
     # (asinh(y / s), s the noise at zero), on a line 0.05 mm apart: inside, the
     # neighbours weigh alike on both sides and the estimate is exact; at the ends they
@@ -180,7 +191,8 @@ def test_the_objective_gradients_match_finite_differences(linearised):
         layout = model.layout.__class__(positions, axes, model.layout.field_sizes, model.layout.is_cone)
         sampled = calc_layout_information(layout, contacts, noise, 8, capacity)
         scores = [calc_design_score(sampled.information, prior, DesignObjective(name)) for name in ("d", "a")]
-        return jnp.stack([*scores, calc_neighbour_score(sampled.readings, contacts.points_S, noise)])
+        neighbours = [calc_neighbour_score(sampled.readings, contacts.points_S, noise, balance) for balance in (1.0, 4.0)]
+        return jnp.stack([*scores, *neighbours])
 
     jacobian = jax.jit(jax.jacrev(scores, argnums=(0, 1)))
     value = jax.jit(scores)
@@ -194,10 +206,10 @@ def test_the_objective_gradients_match_finite_differences(linearised):
             plus = value(positions + step, axes) if which == 0 else value(positions, axes + step)
             minus = value(positions - step, axes) if which == 0 else value(positions, axes - step)
             fd = np.asarray(plus - minus) / (2 * h)
-            for objective in range(3):
+            for objective in range(4):
                 ad = float(gradient[objective, taxel, k])
                 scale = max(abs(ad), 1e-3 * float(np.abs(gradient[objective]).max()))
-                assert abs(fd[objective] - ad) <= 2e-3 * scale, ("dak"[objective], taxel, k, fd[objective], ad)
+                assert abs(fd[objective] - ad) <= 2e-3 * scale, (("d", "a", "k", "k balanced")[objective], taxel, k, fd[objective], ad)
                 checked += abs(ad) > 0.0
     assert checked >= 12
 

@@ -96,12 +96,14 @@ def test_ablation_table1_and_fine_tuning_curve_smoke(tmp_path, monkeypatch):
 def test_layout_design_smoke(tmp_path, monkeypatch):
     run_experiment(monkeypatch, "layout_design", "--smoke", "--output", tmp_path)
     report = json.loads((tmp_path / "layout_design.json").read_text())
-    risers, risers_d, inside = (report["designs"][name]["scores"] for name in ("risers", "risers-d", "inside"))
-    assert set(risers) == {"designed", "built-in", "regular", "random start"} and set(risers_d) == {"designed-d", "built-in", "regular", "random start"}
-    assert set(inside) == {"designed-inside", "random", "built-in", "regular"}
-    assert [report["designs"][name]["config"]["objective"] for name in ("risers", "risers-d", "inside")] == ["k", "d", "d"]
+    # The smoke leaves out risers-d (the D-optimal objective under the risers' constraints: both run here).
+    assert set(report["designs"]) == {"risers", "inside"}
+    risers, inside = (report["designs"][name]["scores"] for name in ("risers", "inside"))
+    assert set(risers) == {"designed", "built-in", "regular", "random start"} and set(inside) == {"designed-inside", "random", "built-in", "regular"}
+    assert [report["designs"][name]["config"]["objective"] for name in ("risers", "inside")] == ["k", "d"]
+    assert report["designs"]["risers"]["config"]["balance"] == 4.0
     # Each design improves its objective over the sensor's own layout (each climb starts there).
-    for scores, designed in ((risers, "designed"), (risers_d, "designed-d"), (inside, "designed-inside")):
+    for scores, designed in ((risers, "designed"), (inside, "designed-inside")):
         assert scores[designed]["score"] > scores["built-in"]["score"], designed
         assert all(np.isfinite(score["rms_neighbour_error_m"]) and score["rms_neighbour_error_m"] > 0.0 for score in scores.values())
     # On risers no port stands higher than the built-in's highest.
@@ -110,7 +112,8 @@ def test_layout_design_smoke(tmp_path, monkeypatch):
     height = report["designs"]["risers"]["config"]["max_height"]
     assert np.isclose(height, 2e-3) and np.all(load_sensor(tmp_path / "layout_design_sensor.json").taxel_positions_S[:, 2] <= height + 1e-12)
     table = {entry["layout"]: entry for entry in report["table"]}
-    for name in ("designed", "built-in", "regular", "random", "designed-d", "designed-inside"):
+    assert set(table) == {"designed", "built-in", "regular", "random", "designed-inside"}
+    for name in table:
         assert all(np.isfinite(table[name][metric]["mean"]) for metric in ("theta_rmse", "phi_rmse", "arc_length_mean", "fn_rmse")), name
     # Every layout's dataset pressed the same events (the probe's path and the force it
     # felt): only the barometers, and so their readings, differ.

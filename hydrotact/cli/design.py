@@ -12,11 +12,6 @@ from ._output import print_report
 
 PER_CONTACT = ("localisation_bounds", "neighbour_errors")
 """LayoutScore's per-contact arrays: in the pictures, not in the report."""
-OBJECTIVES = {
-    "d": "D-optimal (mean log det, higher is better)",
-    "a": "A-optimal (minus mean CRB, mm^2, higher is better)",
-    "k": "learned (minus mean squared nearest-neighbour error, mm^2, higher is better)",
-}
 
 
 def add_parser(subparsers):
@@ -37,6 +32,9 @@ def add_parser(subparsers):
     parser.add_argument("--objective", default=default("objective"), choices=["d", "a", "k"],
                         help="d: information volume (D-optimal); a: localisation bound (A-optimal); k: the leave-one-out localisation error of a "
                         "nearest-neighbour estimator learned from the readings (ranks layouts as a trained estimator does) (default: %(default)s)")
+    parser.add_argument("--balance", type=number, default=default("balance"), metavar="P",
+                        help="k: the p-norm over the estimated target's components (theta and phi, or x, y, z) of their mean squared errors; "
+                        "1 sums them, a larger p leans on the worst (default %(default)g)")
     parser.add_argument("--placement", choices=["inside", "board"], help="ports inside the elastomer or on the board (default: where the sensor's are)")
     parser.add_argument("--spacing", type=number, default=default("spacing"), metavar="M", help=f"least distance between ports, m (default {default('spacing'):g})")
     parser.add_argument("--margin", type=number, default=default("margin"), metavar="M", help=f"least distance from a port to the elastomer's boundary, m (default {default('margin'):g})")
@@ -71,11 +69,13 @@ def run(args) -> None:
     from .._files import check_output, write_text_atomic
     from ..datasets import DatasetConfig
     from ..design import DesignConfig, design_layout
+    from ..design._design import OBJECTIVE_DESCRIPTIONS, OBJECTIVE_SCORES
     from ..sensors import document_text
 
     output = check_output(args.output, suffixes=(".json",), what="the designed sensor")
     config = DesignConfig(
-        objective=args.objective, contacts=args.contacts, batch=args.batch, num_rays=args.rays, relative_noise=args.relative_noise, noise_floor=args.noise_floor, noise_rms=args.noise,
+        objective=args.objective, balance=args.balance,
+        contacts=args.contacts, batch=args.batch, num_rays=args.rays, relative_noise=args.relative_noise, noise_floor=args.noise_floor, noise_rms=args.noise,
         placement=args.placement, margin=args.margin, spacing=args.spacing, max_tilt_deg=args.max_tilt, max_height=args.max_height, field_sizes=args.field_sizes,
         restarts=args.restarts, steps=args.steps, seed=args.seed,
     )
@@ -109,7 +109,7 @@ def run(args) -> None:
     report = {
         "designed_sensor": str(output),
         "barometers": design.spec.num_taxels,
-        "objective": OBJECTIVES[config.objective],
+        "objective": f"{OBJECTIVE_DESCRIPTIONS[config.objective]}; score: {OBJECTIVE_SCORES[config.objective]}",
         "designed_score": f"{design.designed.score:.5g} (held out {design.designed.held_out_score:.5g})",
         "built_in_score": "n/a (other count)" if design.builtin is None else f"{design.builtin.score:.5g} (held out {design.builtin.held_out_score:.5g})",
         "best_random_score": "none" if best_random is None else f"{best_random.score:.5g} (held out {best_random.held_out_score:.5g})",

@@ -16,6 +16,7 @@ from ._design import LayoutDesign as LayoutDesign
 from ._design import LayoutScore as LayoutScore
 from ._design import design_layout as design_layout
 from ._design import draw_design_contacts as draw_design_contacts
+from ._design import make_noise_model as make_noise_model
 from ._feasible import FeasibleRegion as FeasibleRegion
 from ._feasible import Placement as Placement
 from ._feasible import calc_closest_points as calc_closest_points
@@ -29,6 +30,7 @@ from ._objective import calc_layout_information as calc_layout_information
 from ._objective import calc_layout_readings as calc_layout_readings
 from ._objective import calc_localisation_bounds as calc_localisation_bounds
 from ._objective import calc_neighbour_errors as calc_neighbour_errors
+from ._objective import calc_neighbour_features as calc_neighbour_features
 from ._objective import calc_neighbour_score as calc_neighbour_score
 from ._objective import calc_neighbour_targets as calc_neighbour_targets
 from ._objective import calc_prior_precision as calc_prior_precision

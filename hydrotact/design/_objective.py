@@ -191,31 +191,39 @@ def calc_neighbour_targets(points_S, contact_center_S=None) -> jnp.ndarray:
     return radius * jnp.stack(calc_contact_angles(points, centre), axis=-1)
 
 
-def calc_neighbour_errors(readings, points, noise: NoiseModel, reference_readings=None, reference_points=None) -> jnp.ndarray:
+def calc_neighbour_features(readings, noise: NoiseModel) -> jnp.ndarray:
+    """What the learned objective's estimator compares: asinh(y / s) of the readings
+    `y` (..., T) Pa above ambient, clipped at the channel's limit, s the noise at zero
+    reading (linear within the noise, logarithmic above it)."""
+    return jnp.arcsinh(jnp.minimum(readings, noise.limit) / jnp.sqrt(noise.variances(0.0)))
+
+
+def calc_neighbour_errors(readings, points, noise: NoiseModel, reference_readings=None, reference_points=None, per_component: bool = False) -> jnp.ndarray:
     """Each contact's squared localisation error under a soft
     :data:`NEIGHBOURS`-nearest-neighbour estimator of its target from the readings
     (see the module): learned from `reference_readings` (M, T) and `reference_points`
     (M, D), or, when they are None, from the other contacts (leave one out).
     `readings` (N, T) Pa above ambient; `points` (N, D) the targets (the contact
-    points, or :func:`calc_neighbour_targets`), m, and the error in m²."""
+    points, or :func:`calc_neighbour_targets`), m, and the error in m² (N,), or with
+    `per_component` each component's (N, D)."""
     leave_one_out = reference_readings is None
     reference_readings = readings if leave_one_out else reference_readings
     reference_points = points if leave_one_out else reference_points
-    scale = jnp.sqrt(noise.variances(0.0))
-
-    def features(y):
-        return jnp.arcsinh(jnp.minimum(y, noise.limit) / scale)
-
-    query, reference = features(readings), features(reference_readings)
+    query, reference = calc_neighbour_features(readings, noise), calc_neighbour_features(reference_readings, noise)
     distances = jnp.sum((query[:, None, :] - reference[None, :, :]) ** 2, axis=-1)
     excluded = jnp.eye(distances.shape[0], distances.shape[1], dtype=bool) if leave_one_out else jnp.zeros(distances.shape, dtype=bool)
     k = min(NEIGHBOURS, reference.shape[0] - leave_one_out)
     width = jnp.sort(jnp.where(excluded, jnp.inf, distances), axis=1)[:, k - 1] + 1e-9  # identical readings: no 0/0
     weights = jax.nn.softmax(jnp.where(excluded, -jnp.inf, -distances / width[:, None]), axis=1)
-    return jnp.sum((weights @ reference_points - points) ** 2, axis=-1)
+    squared = (weights @ reference_points - points) ** 2
+    return squared if per_component else jnp.sum(squared, axis=-1)
 
 
-def calc_neighbour_score(readings, points, noise: NoiseModel) -> jnp.ndarray:
-    """The `k` objective's score (higher is better): minus the mean leave-one-out
-    squared localisation error of :func:`calc_neighbour_errors`, mm²."""
-    return -jnp.mean(calc_neighbour_errors(readings, points, noise)) * 1e6
+def calc_neighbour_score(readings, points, noise: NoiseModel, balance: float = 1.0) -> jnp.ndarray:
+    """The `k` objective's score (higher is better), mm²: minus the `balance`-norm of
+    the per-component mean leave-one-out squared errors of
+    :func:`calc_neighbour_errors` (the targets' components: θ and φ as arcs, or x, y,
+    z). `balance` 1 sums them (the mean squared error of the whole target); a larger
+    one leans on the worst component, towards their maximum (see :class:`DesignConfig`)."""
+    squared = jnp.mean(calc_neighbour_errors(readings, points, noise, per_component=True), axis=0)
+    return -jnp.sum(squared**balance) ** (1.0 / balance) * 1e6

@@ -59,7 +59,7 @@ def _take(contacts, indices):
     return jax.tree_util.tree_map(take, contacts)
 
 
-def _make_scorer(contacts, targets, noise, prior, objective, num_rays):
+def _make_scorer(contacts, targets, noise, prior, objective, num_rays, balance=1.0):
     """(capacity, template, params, indices) -> _Scored: the score over the contacts
     `indices` and its gradients in the params (positions in mm, raw axes, field
     sizes), jitted once per capacity."""
@@ -72,7 +72,7 @@ def _make_scorer(contacts, targets, noise, prior, objective, num_rays):
                 chosen = _take(contacts, indices)
                 if objective == DesignObjective.K:  # readings only: each contact is the others' neighbour
                     sampled = calc_layout_readings(_layout(template, *params), chosen, num_rays, capacity)
-                    return calc_neighbour_score(sampled.readings, jnp.asarray(targets)[indices], noise), sampled
+                    return calc_neighbour_score(sampled.readings, jnp.asarray(targets)[indices], noise, balance), sampled
                 information = calc_layout_information(_layout(template, *params), chosen, noise, num_rays, capacity)
                 return calc_design_score(information.information, prior, objective), information
 
@@ -93,12 +93,12 @@ def _grown(compute, capacity):
     return result, fitted.rounded_up()
 
 
-def _score_layout(layout, contacts, targets, noise, prior, objective, num_rays, capacity):
+def _score_layout(layout, contacts, targets, noise, prior, objective, num_rays, capacity, balance=1.0):
     """(score, each contact's Cramér–Rao bound (m), each contact's leave-one-out
     nearest-neighbour error (m), capacity): both error models, whatever the objective."""
     information, capacity = _grown(lambda c: _information_kernel(layout, contacts, noise, num_rays, c), capacity)
     if objective == DesignObjective.K:
-        value = float(calc_neighbour_score(information.readings, targets, noise))
+        value = float(calc_neighbour_score(information.readings, targets, noise, balance))
     else:
         value = float(calc_design_score(information.information, prior, objective))
     neighbour = np.sqrt(np.asarray(calc_neighbour_errors(information.readings, targets, noise)))
