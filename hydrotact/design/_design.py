@@ -45,9 +45,9 @@ class DesignConfig:
     trained estimators' errors where the bounds did not; see :mod:`._objective`), "d"
     (D-optimal) or "a" (A-optimal, the localisation bound); `balance` for "k": the p
     of the p-norm over the target's components (θ and φ, or x, y, z) of their mean
-    squared errors, 1 summing them and a larger one leaning on the worst (on sphere8
-    the sum let the design buy θ with φ: θ RMSE -37 % and φ level against the
-    built-in after training); `contacts` drawn for the
+    squared errors, 1 summing them and a larger one leaning on the worst, so that one
+    angle is not bought with the other (on sphere8 the summed and the balanced
+    designs trained to the same errors within their spreads); `contacts` drawn for the
     design (a pool: for "d" and "a" each step's gradient is over a fresh minibatch of
     `batch` of them, and every `eval_every` steps the whole pool is scored, the best
     layout so far kept; a design fitted to a few fixed contacts fits them, not the
