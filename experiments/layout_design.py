@@ -194,6 +194,8 @@ def main() -> None:
     parser.add_argument("--design-steps", type=int, default=60)
     parser.add_argument("--design-restarts", type=int, default=2)
     parser.add_argument("--design-probe", default=DESIGN_PROBE, help="the probe of the design's contacts (the datasets use the regime's own)")
+    parser.add_argument("--asinh-scale", type=float, help="train the estimators on compressed inputs (TrainConfig.asinh_scale, Pa); "
+                        "the results are written as layout_design_asinh.{json,md,png} beside the others, from the same designs and datasets")
     parser.add_argument("--output", type=Path, default=Path(__file__).parent / "results")
     parser.add_argument("--smoke", action="store_true", help="a tiny design, tiny datasets, one seed, two epochs: for the tests")
     args = parser.parse_args()
@@ -210,6 +212,8 @@ def main() -> None:
     material_file = write_material(work / "material.json", material)
     timings = {}
     designs = {}
+    inputs = "" if args.asinh_scale is None else f"_asinh{args.asinh_scale:g}"  # the models' folders
+    stem = NAME if args.asinh_scale is None else f"{NAME}_asinh"  # the results' files
     run_designs = tuple(name for name in DESIGNS if not (args.smoke and name in SMOKE_SKIPS))
     layouts = tuple(layout for layout in LAYOUTS if DESIGN_OF[layout] in run_designs)
     for name in run_designs:
@@ -230,10 +234,10 @@ def main() -> None:
         rate = float(dataset.manifest["config"]["rate_hz"])
         baselines[layout] = _neighbour_baseline(dataset, spec, radius)
         for seed in range(args.seeds):
-            model = work / f"{layout}_gru_binned_{seed}"
+            model = work / f"{layout}_gru_binned{inputs}_{seed}"
             model.mkdir(exist_ok=True)
             t = time.perf_counter()
-            trained = train_estimator(dataset, load_sensor(sensors[layout]), TrainConfig(seed=seed, max_epochs=args.max_epochs, **smoke), folder=model)
+            trained = train_estimator(dataset, load_sensor(sensors[layout]), TrainConfig(seed=seed, max_epochs=args.max_epochs, asinh_scale=args.asinh_scale, **smoke), folder=model)
             save_estimator(trained, model, sensors[layout])
             result = evaluate_estimator(trained, dataset.blocks("test"), rate, radius)
             runs.append({"layout": layout, "seed": seed, "epochs": len(trained.history), "best_epoch": trained.best_epoch,
@@ -241,27 +245,33 @@ def main() -> None:
             print(f"{layout} seed {seed}: " + ", ".join(f"{k} {v:.3g}" for k, v in result["metrics"].items()), flush=True)
     table = _table(layouts, runs, scores, baselines)
     document = {
-        "settings": {"sensor": args.sensor, "events": args.events, "seeds": args.seeds, "max_epochs": args.max_epochs, "smoke": args.smoke, "material": MATERIAL},
+        "settings": {"sensor": args.sensor, "events": args.events, "seeds": args.seeds, "max_epochs": args.max_epochs, "asinh_scale": args.asinh_scale, "smoke": args.smoke,
+                     "material": MATERIAL},
         "designs": designs, "table": table, "runs": runs, "timings_s": timings | {"total": time.perf_counter() - started},
     }
     output.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(output / f"{NAME}.json", json.dumps(document, indent=2) + "\n")
+    write_text_atomic(output / f"{stem}.json", json.dumps(document, indent=2) + "\n")
+    inputs_text = "z-scores of the readings (the paper's)" if args.asinh_scale is None else f"asinh of the reading above rest over {args.asinh_scale:g} Pa, z-scored"
     how = "; ".join(f"{name}: objective {designs[name]['config']['objective']}, {designs[name]['config']['contacts']} contacts (+ as many held out)" for name in run_designs)
     settings = (f"{args.sensor}; {args.events} events per dataset, {args.seeds} seed(s), at most {args.max_epochs} epochs{' (smoke)' if args.smoke else ''}; "
+                f"estimator inputs: {inputs_text}; "
                 f"designs: {how}; each {designs['risers']['config']['restarts']} random starts, "
                 f"{designs['risers']['config']['steps']} steps, risers at most {designs['risers']['config']['max_height'] * 1e3:.3g} mm high; "
                 f"{document['timings_s']['total'] / 60:.0f} min in this invocation"
                 f" (datasets and models read back from the work folder not counted).")
-    write_text_atomic(output / f"{NAME}.md", settings + "\n\n" + _markdown(table))
-    write_text_atomic(output / f"{NAME}_sensor.json", Path(sensors["designed"]).read_text())
-    _plot(table, output / f"{NAME}.png")
-    from hydrotact.viz import plot_design_convergence, render_layouts
+    write_text_atomic(output / f"{stem}.md", settings + "\n\n" + _markdown(table))
+    _plot(table, output / f"{stem}.png")
+    written = ".json, .md, .png"
+    if args.asinh_scale is None:  # the designs' own files (the same for either estimator)
+        from hydrotact.viz import plot_design_convergence, render_layouts
 
-    render_layouts(spec.make_mesh(check=False), {name: load_sensor(sensors[name]) for name in layouts}, output / f"{NAME}_layouts.png")
-    main = designs["risers"]  # the main design's climbs (the others climb other objectives)
-    plot_design_convergence(main["histories"], main["start_names"], output / f"{NAME}_convergence.png", main["config"]["objective"])
+        write_text_atomic(output / f"{NAME}_sensor.json", Path(sensors["designed"]).read_text())
+        render_layouts(spec.make_mesh(check=False), {name: load_sensor(sensors[name]) for name in layouts}, output / f"{NAME}_layouts.png")
+        main = designs["risers"]  # the main design's climbs (the others climb other objectives)
+        plot_design_convergence(main["histories"], main["start_names"], output / f"{NAME}_convergence.png", main["config"]["objective"])
+        written += ", _layouts.png, _convergence.png, _sensor.json"
     print(settings + "\n\n" + _markdown(table))
-    print(f"written {output / NAME}.json, .md, .png, _layouts.png, _convergence.png, _sensor.json")
+    print(f"written {output / stem}{written}")
 
 
 def _table(layouts, runs: list, scores: dict, baselines: dict) -> list:

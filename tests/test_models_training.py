@@ -193,6 +193,36 @@ def test_a_saved_model_reads_back_the_same(trained, tmp_path):
         load_estimator(tmp_path)
 
 
+def test_compressed_inputs_are_the_asinh_of_the_reading_above_rest(tiny, tmp_path):
+    """With `asinh_scale`, the inputs are z-scores of asinh((y - rest) / scale), the
+    rest each channel's median over the training split's no-contact samples; the model
+    saves, reads back and predicts the same; a scale that is not a positive pressure
+    is refused."""
+    trained = train_estimator(tiny, load_sensor("sphere8"), TrainConfig(**(QUICK | {"max_epochs": 2, "asinh_scale": 20.0})))
+    train = tiny.arrays("train")
+    readings = np.column_stack([train[name] for name in trained.channels])
+    rest = np.median(readings[train["contact"] <= 0], axis=0)
+    compressed = np.arcsinh((readings - rest) / 20.0)
+    normaliser = trained.normaliser
+    assert normaliser.scale == 20.0 and trained.config.asinh_scale == 20.0
+    np.testing.assert_allclose(normaliser.rest, rest, rtol=0, atol=0)
+    np.testing.assert_allclose(normaliser(readings), (compressed - compressed.mean(axis=0)) / compressed.std(axis=0), rtol=1e-12, atol=1e-12)
+    # A 0.1 N press and an 8 N one differ by a few units of input, not by a factor of 80.
+    assert np.ptp(normaliser(readings), axis=0).max() < 20.0
+    save_estimator(trained, tmp_path, "sphere8")
+    loaded = load_estimator(tmp_path)
+    assert loaded.normaliser.scale == 20.0 and loaded.config == trained.config
+    np.testing.assert_array_equal(loaded.normaliser.rest, rest)
+    block = tiny.blocks("test")[0]
+    recording = np.column_stack([block[name] for name in trained.channels])
+    a, b = predict_recording(trained, recording), predict_recording(loaded, recording)
+    for name in ("fx", "fn", "theta", "phi", "contact_probability"):
+        np.testing.assert_allclose(a[name], b[name], rtol=1e-6, atol=1e-7, err_msg=name)
+    for bad in (0.0, -5.0, float("nan"), True):
+        with pytest.raises(HydrotactError, match=r"asinh-scale: must be a positive pressure in Pa"):
+            TrainConfig(asinh_scale=bad)
+
+
 def test_burn_in_sequences_give_the_window_methods_loss(tiny, trained):
     """The same labels, the loss of the trained GRU: from sequences of 64 labels after a
     32-sample burn-in, and from the paper's windows (each label after its own 511
@@ -269,7 +299,7 @@ int main(void) {
 """
 
 
-@pytest.mark.parametrize("variant", ["gru binned (trained)", "gru plain", "rnn binned", "mlp plain"])
+@pytest.mark.parametrize("variant", ["gru binned (trained)", "gru binned (trained), asinh inputs", "gru plain", "rnn binned", "mlp plain"])
 def test_the_c_export_compiles_and_matches_jax(tiny, trained, tmp_path, variant):
     import dataclasses
     import shutil
@@ -278,7 +308,11 @@ def test_the_c_export_compiles_and_matches_jax(tiny, trained, tmp_path, variant)
     from hydrotact.models import init_estimator
 
     model = trained
-    if variant != "gru binned (trained)":
+    if variant.endswith("asinh inputs"):  # the trained weights on compressed inputs: the C code must compress as the model does
+        train = tiny.arrays("train")
+        readings = np.column_stack([train[name] for name in trained.channels])
+        model = dataclasses.replace(trained, normaliser=Normaliser.fit(readings, 20.0, train["contact"] <= 0))
+    elif variant != "gru binned (trained)":
         architecture, binned = variant.split()
         spec = make_estimator_spec(load_sensor("sphere8"), architecture, binned == "binned")
         model = dataclasses.replace(trained, spec=spec, params=init_estimator(spec, jax.random.PRNGKey(3)))
@@ -286,7 +320,8 @@ def test_the_c_export_compiles_and_matches_jax(tiny, trained, tmp_path, variant)
     assert compiler, "no C compiler on this machine"
     summary = export_c_header(model, tmp_path / "model.h", "sphere8")
     bins = model.spec.theta_bins.count + model.spec.phi_bins.count if model.spec.binned else 0
-    assert summary["flash_bytes"] == 4 * (summary["parameters"] + 3 * 8 + bins)
+    normalisation = 5 * 8 + 1 if model.normaliser.scale is not None else 3 * 8  # mean (two parts), 1 / std; rest (two parts), 1 / scale
+    assert summary["flash_bytes"] == 4 * (summary["parameters"] + normalisation + bins)
     (tmp_path / "main.c").write_text(C_MAIN)
     build = subprocess.run([compiler, "-std=c99", "-O2", "-Wall", "-Werror", "-o", str(tmp_path / "step"), str(tmp_path / "main.c"), "-lm"], capture_output=True, text=True, cwd=tmp_path)
     assert build.returncode == 0, build.stderr

@@ -41,6 +41,9 @@ def add_parser(subparsers):
     parser.add_argument("--batch-size", type=int, default=default("batch_size"), metavar="N", help=f"sequences per step (default {default('batch_size')}, the paper's)")
     parser.add_argument("--learning-rate", type=number, default=default("learning_rate"), metavar="R", help=f"Adam's learning rate (default {default('learning_rate'):g})")
     parser.add_argument("--schedule", choices=SCHEDULES, default=default("schedule"), help=f"learning-rate schedule over --max-epochs (default {default('schedule')})")
+    parser.add_argument("--asinh-scale", type=number, metavar="PA",
+                        help="compress the readings first, asinh((reading - rest) / PA), so light presses move the inputs too "
+                        "(e.g. 20; default: none, the paper's z-scores of the readings)")
     parser.add_argument("--max-epochs", type=int, default=default("max_epochs"), metavar="N", help=f"the most epochs (default {default('max_epochs')})")
     parser.add_argument("--patience", type=int, default=default("patience"), metavar="N", help=f"stop after this many epochs without a better validation loss (default {default('patience')})")
     parser.add_argument("--last-epoch", action="store_true", help="keep the last epoch's parameters, not the best validation epoch's")
@@ -60,6 +63,7 @@ def run(args) -> None:
         architecture=args.architecture, binned=not args.plain, hidden=args.hidden, cover=args.cover, sequence_length=args.sequence_length,
         burn_in=args.burn_in, batch_size=args.batch_size, learning_rate=args.learning_rate, schedule=args.schedule,
         max_epochs=args.max_epochs, patience=args.patience, restore_best=not args.last_epoch, seed=args.seed,
+        asinh_scale=args.asinh_scale,
     )
     dataset = load_dataset(args.dataset)
     sensor = load_sensor(dataset.manifest["sensor"]["spec"])

@@ -61,6 +61,12 @@ def export_c_header(trained, path, sensor_name: str = "") -> dict:
         _array("hydrotact_mean_hi", mean_hi), _array("hydrotact_mean_lo", mean - mean_hi.astype(np.float64)),
         _array("hydrotact_inv_std", 1.0 / np.asarray(trained.normaliser.std)),
     ]
+    compressed = trained.normaliser.scale is not None
+    if compressed:  # asinh((reading - rest) / scale): the rest in two floats, as the mean
+        rest = np.asarray(trained.normaliser.rest, dtype=np.float64)
+        rest_hi = rest.astype(np.float32)
+        lines += [_array("hydrotact_rest_hi", rest_hi), _array("hydrotact_rest_lo", rest - rest_hi.astype(np.float64)),
+                  f"static const float hydrotact_inv_scale = {float(np.float32(1.0 / trained.normaliser.scale))!r}f;"]
     for k, layer in enumerate(params["layers"]):
         for name, value in layer.items():
             lines.append(_array(f"hydrotact_l{k}_{name}", value))
@@ -73,7 +79,10 @@ def export_c_header(trained, path, sensor_name: str = "") -> dict:
         "/* One sample of readings (Pa, channel order) in; the estimates out; the state carried. */",
         "static void hydrotact_step(hydrotact_state *state, const float *readings, hydrotact_output *out) {",
         f"  float x[{max(sizes)}], gi[{widest}], raw[{spec.num_outputs}];" + (f" float gh[{widest}];" if spec.recurrent else ""),
-        f"  for (int j = 0; j < {spec.num_inputs}; ++j) x[j] = ((readings[j] - hydrotact_mean_hi[j]) - hydrotact_mean_lo[j]) * hydrotact_inv_std[j];",
+        f"  for (int j = 0; j < {spec.num_inputs}; ++j) x[j] = ((readings[j] - hydrotact_mean_hi[j]) - hydrotact_mean_lo[j]) * hydrotact_inv_std[j];"
+        if not compressed else
+        f"  for (int j = 0; j < {spec.num_inputs}; ++j) x[j] = ((asinhf(((readings[j] - hydrotact_rest_hi[j]) - hydrotact_rest_lo[j]) * hydrotact_inv_scale)"
+        " - hydrotact_mean_hi[j]) - hydrotact_mean_lo[j]) * hydrotact_inv_std[j];",
     ]
     for k, (a, h) in enumerate(zip(sizes[:-1], sizes[1:])):
         p = f"hydrotact_l{k}_"
@@ -106,5 +115,5 @@ def export_c_header(trained, path, sensor_name: str = "") -> dict:
     body.append(f"  out->contact = hydrotact_sigmoid(raw[{layout['contact'].start}]);\n}}\n")
     text = "\n".join(lines) + "\n" + "\n".join(body) + "\n#endif\n"
     write_text_atomic(path, text)
-    weights = count_parameters(spec) + 3 * spec.num_inputs + (spec.theta_bins.count + spec.phi_bins.count if spec.binned else 0)
+    weights = count_parameters(spec) + (5 * spec.num_inputs + 1 if compressed else 3 * spec.num_inputs) + (spec.theta_bins.count + spec.phi_bins.count if spec.binned else 0)
     return {"path": str(path), "parameters": count_parameters(spec), "macs_per_step": count_macs(spec), "flash_bytes": 4 * weights}

@@ -59,7 +59,7 @@ def load_estimator(folder) -> TrainedEstimator:
         if leaf.shape != expected.shape:
             raise HydrotactError(f"{folder / WEIGHTS}: a weight of shape {leaf.shape}, the model needs {expected.shape}")
     params = jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(like), [jnp.asarray(leaf) for leaf in leaves])
-    normaliser = Normaliser(np.asarray(document["normaliser"]["mean_Pa"]), np.asarray(document["normaliser"]["std_Pa"]))
+    normaliser = Normaliser.from_json(document["normaliser"])
     config = dict(document["config"])
     config["hidden"] = None if config["hidden"] is None else tuple(config["hidden"])
     config["weights"] = tuple(config["weights"].items())

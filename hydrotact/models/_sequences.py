@@ -9,7 +9,8 @@ samples, each preceded by `burn_in` samples of context whose outputs do not coun
 
 At a block's start the context is shorter; the sequence is then padded at the front
 with the block's first sample (masked). Inputs are normalised per channel with the
-training split's mean and standard deviation (:class:`Normaliser`).
+training split's mean and standard deviation, of the readings or of their asinh
+(:class:`Normaliser`).
 """
 
 import dataclasses
@@ -21,21 +22,49 @@ FORCE_COLUMNS = ("fx", "fy", "fz", "fn")
 
 @dataclasses.dataclass(frozen=True)
 class Normaliser:
-    """Per-channel mean and standard deviation (Pa) of the training inputs."""
+    """Per-channel input normalisation: z-scores (the mean and standard deviation over
+    the training inputs) of the readings in Pa, the paper's; or, with `scale` (Pa), of
+    asinh((y - rest) / scale), `rest` each channel's reading at rest (Pa): linear
+    within `scale` of rest and logarithmic above it, so that a 0.1 N press moves the
+    inputs as visibly as an 8 N one. (`mean` and `std` are then of the compressed
+    inputs, unitless.)"""
 
     mean: np.ndarray
     std: np.ndarray
+    rest: np.ndarray | None = None
+    scale: float | None = None
 
     @classmethod
-    def fit(cls, readings: np.ndarray) -> "Normaliser":
-        std = readings.std(axis=0)
-        return cls(readings.mean(axis=0), np.where(std > 0.0, std, 1.0))
+    def fit(cls, readings: np.ndarray, scale: float | None = None, resting: np.ndarray | None = None) -> "Normaliser":
+        """From the training `readings` (N, C) Pa; with `scale`, the rest is each
+        channel's median over the samples `resting` marks (N,) (no contact; all
+        samples where none is marked)."""
+        rest = None
+        if scale is not None:
+            quiet = readings[resting] if resting is not None and np.any(resting) else readings
+            rest = np.median(quiet, axis=0)
+        inputs = cls(np.zeros(readings.shape[1]), np.ones(readings.shape[1]), rest, scale).compress(readings)
+        std = inputs.std(axis=0)
+        return cls(inputs.mean(axis=0), np.where(std > 0.0, std, 1.0), rest, scale)
+
+    def compress(self, readings: np.ndarray) -> np.ndarray:
+        """The readings before the z-scores: as they are, or asinh((y - rest) / scale)."""
+        return readings if self.scale is None else np.arcsinh((readings - self.rest) / self.scale)
 
     def __call__(self, readings: np.ndarray) -> np.ndarray:
-        return (readings - self.mean) / self.std
+        return (self.compress(readings) - self.mean) / self.std
 
     def to_json(self) -> dict:
-        return {"mean_Pa": self.mean.tolist(), "std_Pa": self.std.tolist()}
+        document = {"mean_Pa": self.mean.tolist(), "std_Pa": self.std.tolist()}
+        if self.scale is not None:
+            document |= {"asinh_scale_Pa": float(self.scale), "rest_Pa": np.asarray(self.rest).tolist()}
+        return document
+
+    @classmethod
+    def from_json(cls, document: dict) -> "Normaliser":
+        scale = document.get("asinh_scale_Pa")
+        rest = None if scale is None else np.asarray(document["rest_Pa"], dtype=np.float64)
+        return cls(np.asarray(document["mean_Pa"], dtype=np.float64), np.asarray(document["std_Pa"], dtype=np.float64), rest, None if scale is None else float(scale))
 
 
 def make_sequences(arrays: dict, channels, normaliser: Normaliser, length: int, burn_in: int, stride: int | None = None, dtype=np.float32) -> tuple[np.ndarray, dict]:
