@@ -25,9 +25,9 @@ class Normaliser:
     """Per-channel input normalisation: z-scores (the mean and standard deviation over
     the training inputs) of the readings in Pa, the paper's; or, with `scale` (Pa), of
     asinh((y - rest) / scale), `rest` each channel's reading at rest (Pa): linear
-    within `scale` of rest and logarithmic above it, so that a 0.1 N press moves the
-    inputs as visibly as an 8 N one. (`mean` and `std` are then of the compressed
-    inputs, unitless.)"""
+    within `scale` of rest and logarithmic above it, so that a light press moves the
+    inputs by a visible step as well as a hard one does. (`mean` and `std` are then of
+    the compressed inputs, unitless.)"""
 
     mean: np.ndarray
     std: np.ndarray

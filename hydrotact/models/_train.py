@@ -51,9 +51,9 @@ class TrainConfig:
     paper's contact weight of 10). **Inputs:** `asinh_scale` None, the paper's
     z-scores of the readings, or a pressure (Pa) that compresses them first,
     asinh((y - rest) / asinh_scale) (see :class:`Normaliser`; on sphere8 with 20 Pa,
-    the noise a design assumes at zero, the held-out φ RMSE fell from 0.42 to 0.30 rad
-    on the built-in layout and from 0.39 to 0.27 on a designed one, and Fn rose by 3
-    and 13 %: benchmarks/RESULTS.md). **Stopping:** `max_epochs`, `patience` (epochs
+    the noise a design assumes at zero, the held-out φ RMSE fell from 0.389 to 0.318
+    rad on the built-in layout and from 0.380 to 0.272 on a designed one, and the Fn
+    RMSE rose by 4 and 13 %: benchmarks/RESULTS.md). **Stopping:** `max_epochs`, `patience` (epochs
     without a better validation loss), `restore_best` (keep the best validation
     epoch's parameters, the default, or the last epoch's). `seed` of the
     initialisation and the shuffles.
