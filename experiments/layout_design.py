@@ -68,7 +68,6 @@ NAME = "layout_design"
 LAYOUTS = ("designed", "built-in", "regular", "random", "designed-d", "designed-inside")
 DESIGNS = ("risers", "risers-d", "inside")
 OBJECTIVE_OF = {"risers": "k", "risers-d": "d", "inside": "d"}
-DESIGNED = {"risers": "designed", "risers-d": "designed-d", "inside": "designed-inside"}
 DESIGN_OF = {"designed": "risers", "built-in": "risers", "regular": "risers", "designed-d": "risers-d", "random": "inside", "designed-inside": "inside"}
 """The design whose held-out contacts score each layout (the designs draw their own)."""
 SMOKE_SKIPS = ("risers-d",)

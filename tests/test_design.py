@@ -149,11 +149,12 @@ def test_the_neighbour_estimator_meets_its_closed_forms(linearised):
     # The score weighs the components' mean squared errors by a p-norm: p = 1 sums them
     # (minus the mean squared error, mm²), a large p tends to the worst component's.
     readings, stretched = jnp.full((40, 3), 500.0), points * np.array([1.0, 3.0, 0.5])
-    per_component = np.mean(((stretched.sum(axis=0) - stretched) / 39 - stretched) ** 2, axis=0) * 1e6
+    missed = ((stretched.sum(axis=0) - stretched) / 39 - stretched) ** 2  # each estimate the mean of the other 39
+    per_component = np.mean(missed, axis=0) * 1e6
     np.testing.assert_allclose(np.asarray(calc_neighbour_errors(readings, jnp.asarray(stretched), noise, per_component=True)).mean(axis=0) * 1e6, per_component, rtol=1e-12)
     for balance, expected_score in ((1.0, -per_component.sum()), (4.0, -np.sum(per_component**4) ** 0.25), (50.0, -per_component.max())):
         np.testing.assert_allclose(float(calc_neighbour_score(readings, jnp.asarray(stretched), noise, balance)), expected_score, rtol=1e-6 if balance == 50.0 else 1e-12)
-    whole = np.mean(np.sum(((stretched.sum(axis=0) - stretched) / 39 - stretched) ** 2, axis=1)) * 1e6
+    whole = np.mean(np.sum(missed, axis=1)) * 1e6
     np.testing.assert_allclose(float(calc_neighbour_score(readings, jnp.asarray(stretched), noise)), -whole, rtol=1e-12)
     # Readings that tell the contacts apart, evenly in the estimator's features
     # (asinh(y / s), s the noise at zero), on a line 0.05 mm apart: inside, the

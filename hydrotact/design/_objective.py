@@ -225,5 +225,10 @@ def calc_neighbour_score(readings, points, noise: NoiseModel, balance: float = 1
     :func:`calc_neighbour_errors` (the targets' components: θ and φ as arcs, or x, y,
     z). `balance` 1 sums them (the mean squared error of the whole target); a larger
     one leans on the worst component, towards their maximum (see :class:`DesignConfig`)."""
-    squared = jnp.mean(calc_neighbour_errors(readings, points, noise, per_component=True), axis=0)
-    return -jnp.sum(squared**balance) ** (1.0 / balance) * 1e6
+    return _balance_neighbour_errors(calc_neighbour_errors(readings, points, noise, per_component=True), balance)
+
+
+def _balance_neighbour_errors(per_component, balance: float = 1.0) -> jnp.ndarray:
+    """:func:`calc_neighbour_score` from the per-component squared errors (N, D) m²
+    of :func:`calc_neighbour_errors` (`per_component=True`), mm²."""
+    return -jnp.sum(jnp.mean(per_component, axis=0) ** balance) ** (1.0 / balance) * 1e6

@@ -11,7 +11,16 @@ import numpy as np
 from .._buffers import run_growing
 from ..taxel import TaxelCapacity
 from ._feasible import FeasibleRegion
-from ._objective import DesignObjective, calc_design_score, calc_layout_information, calc_layout_readings, calc_localisation_bounds, calc_neighbour_errors, calc_neighbour_score
+from ._objective import (
+    DesignObjective,
+    _balance_neighbour_errors,
+    calc_design_score,
+    calc_layout_information,
+    calc_layout_readings,
+    calc_localisation_bounds,
+    calc_neighbour_errors,
+    calc_neighbour_score,
+)
 
 POSITION_UNIT = 1e-3
 """Ports (and disk radii) are optimised in millimetres."""
@@ -97,11 +106,12 @@ def _score_layout(layout, contacts, targets, noise, prior, objective, num_rays, 
     """(score, each contact's Cramér–Rao bound (m), each contact's leave-one-out
     nearest-neighbour error (m), capacity): both error models, whatever the objective."""
     information, capacity = _grown(lambda c: _information_kernel(layout, contacts, noise, num_rays, c), capacity)
+    per_component = calc_neighbour_errors(information.readings, targets, noise, per_component=True)  # once: both the k score and the reported error
     if objective == DesignObjective.K:
-        value = float(calc_neighbour_score(information.readings, targets, noise, balance))
+        value = float(_balance_neighbour_errors(per_component, balance))
     else:
         value = float(calc_design_score(information.information, prior, objective))
-    neighbour = np.sqrt(np.asarray(calc_neighbour_errors(information.readings, targets, noise)))
+    neighbour = np.sqrt(np.asarray(jnp.sum(per_component, axis=-1)))
     return value, np.asarray(calc_localisation_bounds(information.information, prior)), neighbour, capacity
 
 

@@ -62,6 +62,7 @@ def export_c_header(trained, path, sensor_name: str = "") -> dict:
         _array("hydrotact_inv_std", 1.0 / np.asarray(trained.normaliser.std)),
     ]
     compressed = trained.normaliser.scale is not None
+    source = "asinhf(((readings[j] - hydrotact_rest_hi[j]) - hydrotact_rest_lo[j]) * hydrotact_inv_scale)" if compressed else "readings[j]"
     if compressed:  # asinh((reading - rest) / scale): the rest in two floats, as the mean
         rest = np.asarray(trained.normaliser.rest, dtype=np.float64)
         rest_hi = rest.astype(np.float32)
@@ -79,10 +80,7 @@ def export_c_header(trained, path, sensor_name: str = "") -> dict:
         "/* One sample of readings (Pa, channel order) in; the estimates out; the state carried. */",
         "static void hydrotact_step(hydrotact_state *state, const float *readings, hydrotact_output *out) {",
         f"  float x[{max(sizes)}], gi[{widest}], raw[{spec.num_outputs}];" + (f" float gh[{widest}];" if spec.recurrent else ""),
-        f"  for (int j = 0; j < {spec.num_inputs}; ++j) x[j] = ((readings[j] - hydrotact_mean_hi[j]) - hydrotact_mean_lo[j]) * hydrotact_inv_std[j];"
-        if not compressed else
-        f"  for (int j = 0; j < {spec.num_inputs}; ++j) x[j] = ((asinhf(((readings[j] - hydrotact_rest_hi[j]) - hydrotact_rest_lo[j]) * hydrotact_inv_scale)"
-        " - hydrotact_mean_hi[j]) - hydrotact_mean_lo[j]) * hydrotact_inv_std[j];",
+        f"  for (int j = 0; j < {spec.num_inputs}; ++j) x[j] = (({source} - hydrotact_mean_hi[j]) - hydrotact_mean_lo[j]) * hydrotact_inv_std[j];",
     ]
     for k, (a, h) in enumerate(zip(sizes[:-1], sizes[1:])):
         p = f"hydrotact_l{k}_"
