@@ -296,6 +296,51 @@ def test_presses_at_the_board_stop_at_their_target_along_the_approach():
     assert np.all(presses.hold_depths < 3e-3), presses.hold_depths
 
 
+def test_slices_start_on_the_rung_their_predicted_needs_fit():
+    """The engine starts a slice on the lowest rung of its ladder that holds what its
+    poses are predicted to need: a start too low climbs to where they fit, one too high
+    stays there, and either way the responses are those computed from the bottom
+    rung (to round-off: a longer buffer can change a sum in its last bit). Every rung
+    holds all of the probe's triangles."""
+    from hydrotact.contact import parse_probe
+    from hydrotact.datasets import _compute, compute_block
+    from hydrotact.sim import make_sensor_model
+
+    spec = load_sensor("sphere8")
+    probe = parse_probe(COARSE_SPHERE)
+    model = make_sensor_model(spec, num_rays=16)
+    plan = sample_events(find_touchable_skin(spec, spec.make_mesh(check=False)), DatasetConfig(events=8), np.random.default_rng(6))
+    event, depth = np.repeat(np.arange(8), 8), np.tile(np.linspace(0.1e-3, 1.6e-3, 8), 8)
+    rows = np.column_stack([plan.points[event] + depth[:, None] * plan.directions[event], plan.rotation_vectors[event]])
+    ladder = _compute._ladder(probe)
+    assert [rung.others for rung in ladder] == [len(probe.faces)] * len(ladder)
+    used = []
+    kernel = _compute._kernel
+
+    def recording(capacity):
+        used.append(ladder.index(capacity))
+        return kernel(capacity)
+
+    from unittest import mock
+
+    with mock.patch.object(_compute, "_kernel", recording):
+        bottom = compute_block(model, probe, rows)
+        fits = int(_compute.calc_start_rungs(probe, bottom["needed"]).max())
+        # From the bottom it climbs to the rung that fits (in more than one step when a
+        # truncated contact under-counted what the taxel buffers need).
+        assert fits > 0 and used[0] == 0 and used[-1] == fits and used == sorted(set(used))
+        used.clear()
+        exact = compute_block(model, probe, rows, needs=bottom["needed"])
+        assert used == [fits]
+        used.clear()
+        high = compute_block(model, probe, rows, needs=np.tile(ladder[fits + 1].sizes, (len(rows), 1)))
+        assert used == [fits + 1]
+    for name in ("force_S", "area", "taxel_pressures", "contact_point_S"):
+        for other in (exact, high):
+            np.testing.assert_allclose(other[name], bottom[name], rtol=1e-12, atol=1e-15 * np.abs(bottom[name]).max(), err_msg=name)
+    assert not bottom["did_overflow"].any() and not high["did_overflow"].any()
+
+
 # --- determinism, resumption, scale-out ---------------------------------------------
 
 

@@ -26,13 +26,17 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._files import atomic_path
-from ..sim import UnitResponse, calc_samples
+from ..sim import SimCapacity, UnitResponse, calc_samples
+from ._compute import calc_start_rungs
 from ._config import PHASES, DatasetConfig
 from ._events import EventPlan
 
 ROUND_SAMPLES = 8
 """The most approach samples per event per round of the march (before contact, and
 while the force so far predicts more)."""
+
+_PAIRS = [field.name for field in dataclasses.fields(SimCapacity)].index("pairs")
+"""Where UnitResponse.needed counts the contact's candidate pairs (none without contact)."""
 
 FAR_ROW = np.array([0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
 """The probe's pose between events: a metre above the sensor (no contact)."""
@@ -88,7 +92,7 @@ class _Rounds:
         self.engine, self.folder, self.on_poses = engine, folder, on_poses
         self.rows, self.parts, self.count, self.rounds = [], [], 0, 0
 
-    def _batch(self, rows: np.ndarray) -> dict:
+    def _batch(self, rows: np.ndarray, needs) -> dict:
         number = len(self.rows)
         path = None if self.folder is None else self.folder / f"batch-{number:05d}.npz"
         result = None
@@ -100,7 +104,7 @@ class _Rounds:
             except (OSError, ValueError, KeyError, EOFError):
                 result = None  # unreadable: compute again
         if result is None:
-            result = self.engine.compute(rows)
+            result = self.engine.compute(rows, needs)
             if path is not None:
                 with atomic_path(path, suffix=".npz") as tmp:
                     np.savez(tmp, rows=rows, **result)
@@ -110,10 +114,11 @@ class _Rounds:
         self.parts.append(result)
         return result
 
-    def add(self, rows: np.ndarray) -> tuple[np.ndarray, dict]:
+    def add(self, rows: np.ndarray, needs: np.ndarray) -> tuple[np.ndarray, dict]:
         """Compute (or load) one round, in batches: (the table indices of its rows,
-        its unit responses)."""
-        parts = [self._batch(rows[start : start + BATCH_ROWS]) for start in range(0, len(rows), BATCH_ROWS)]
+        its unit responses); `needs` (n, 6) the buffers each row is predicted to need
+        (:func:`hydrotact.datasets._compute.compute_block`)."""
+        parts = [self._batch(rows[start : start + BATCH_ROWS], needs[start : start + BATCH_ROWS]) for start in range(0, len(rows), BATCH_ROWS)]
         self.rounds += 1
         index = np.arange(self.count, self.count + len(rows))
         self.count += len(rows)
@@ -140,6 +145,21 @@ def _samples_to_go(forces: list, target: float) -> int:
     return int(np.clip(np.ceil(ahead) + 1, 1, ROUND_SAMPLES))
 
 
+def _predicted_needs(needs: list, first: int, count: int) -> np.ndarray:
+    """(count, 6): the buffers an event's approach samples `first` .. `first + count
+    - 1` are predicted to need, from its samples so far (`needs[k]`, sample k's): the
+    last one's, grown as between its last two when both touch (a deeper press needs
+    more; at first contact the need jumps from nothing to whole clusters of tets, no
+    slope to extrapolate); zeros before any. A prediction only chooses where a slice
+    starts on the engine's ladder: one too low costs a climb, never a wrong answer."""
+    if not needs:
+        return np.zeros((count, len(SimCapacity().sizes)))
+    touching = len(needs) > 1 and needs[-2][_PAIRS] > 0
+    slope = np.maximum(needs[-1] - needs[-2], 0) if touching else np.zeros_like(needs[-1])
+    ahead = np.arange(first, first + count) - (len(needs) - 1)
+    return needs[-1] + ahead[:, None] * slope
+
+
 def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float, folder: Path | None = None, on_poses=None, on_round=None) -> Presses:
     """March every event's approach until its target force (see the module), then
     compute the holds and the no-contact pose. `folder` keeps each batch's responses
@@ -151,6 +171,7 @@ def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float
     rounds = _Rounds(engine, folder, on_poses)
     index_of = [[] for _ in range(count)]  # table index per approach sample so far
     forces = [[] for _ in range(count)]
+    needs = [[] for _ in range(count)]  # the buffers each approach sample needed
     done = np.zeros(count, dtype=bool)
     first_above = np.full(count, -1)  # the first sample at or above the target
     taken = np.zeros(count, dtype=np.int64)  # approach samples computed per event
@@ -163,18 +184,22 @@ def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float
         events = np.repeat(active, lengths)
         k = np.concatenate([np.arange(a, b) for a, b in zip(starts, stops)])
         depths = -config.clearance + k * steps[events]
-        # Computed shallowest first: the engine's slices then hold poses of like depth,
-        # and a slice's buffers grow to its deepest pose only (a deep press can need 20x
-        # the buffers of a light one).
-        order = np.argsort(depths, kind="stable")
-        index, force = np.empty(len(events), np.int64), np.empty(len(events))
-        index[order], result = rounds.add(_pose_rows(plan, events[order], depths[order]))
+        predicted = np.concatenate([_predicted_needs(needs[e], a, b - a) for e, a, b in zip(active.tolist(), starts.tolist(), stops.tolist())])
+        # Computed by the rung they are predicted to need, shallowest first within
+        # one: the engine's slices then hold poses of like needs, and a slice's buffers
+        # grow to its hardest pose only (a deep press can need 20x the buffers of a
+        # light one, a press near the sensor's base more than one on top).
+        order = np.lexsort((depths, calc_start_rungs(engine.probe, predicted)))
+        index, force, needed = np.empty(len(events), np.int64), np.empty(len(events)), np.empty((len(events), predicted.shape[1]))
+        index[order], result = rounds.add(_pose_rows(plan, events[order], depths[order]), predicted[order])
         force[order] = _axial_forces(result["force_S"], plan.directions[events[order]], modulus)
+        needed[order] = result["needed"]
         offset = 0
         for event, length in zip(active.tolist(), lengths.tolist()):
             new = force[offset : offset + length]
             index_of[event] += index[offset : offset + length].tolist()
             forces[event] += new.tolist()
+            needs[event] += list(needed[offset : offset + length])
             offset += length
             above = np.flatnonzero(new >= plan.target_forces[event])
             if above.size:
@@ -190,6 +215,7 @@ def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float
     reached = first_above >= 0
     hold_depths = np.empty(count)
     approach, depths = [], []
+    hold_needs = np.empty((count, len(SimCapacity().sizes)))
     for event in range(count):
         step = steps[event]
         if reached[event]:
@@ -204,12 +230,13 @@ def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float
         else:  # the target lies deeper than max_depth: hold at the last sample
             used = int(limits[event]) - 1
             hold_depths[event] = -config.clearance + used * step
+        hold_needs[event] = needs[event][used]  # the sample at or past the hold: it needs no less
         approach.append(np.asarray(index_of[event][:used], dtype=np.int64))
         depths.append(-config.clearance + np.arange(used) * step)
-    # Shallowest first, as in the march: in event order nearly every slice held a deep
-    # hold and climbed to the largest buffers.
-    order = np.argsort(hold_depths, kind="stable")
-    index, _ = rounds.add(np.vstack([_pose_rows(plan, order, hold_depths[order]), FAR_ROW[None]]))
+    # By rung and shallowest first, as in the march: in event order nearly every slice
+    # held a deep hold and climbed to the largest buffers.
+    order = np.lexsort((hold_depths, calc_start_rungs(engine.probe, hold_needs)))
+    index, _ = rounds.add(np.vstack([_pose_rows(plan, order, hold_depths[order]), FAR_ROW[None]]), np.vstack([hold_needs[order], np.zeros_like(hold_needs[:1])]))
     hold = np.empty(count, dtype=np.int64)
     hold[order] = index[:count]
     rows, table = rounds.table()
