@@ -20,7 +20,6 @@ Stages, one sub-package each, in pipeline order:
 command; no stage imports either. Units are SI throughout (m, Pa, N, s, rad).
 """
 
-from ._errors import HydrotactError as HydrotactError
-from ._errors import HydrotactWarning as HydrotactWarning
+from ._errors import HydrotactError as HydrotactError, HydrotactWarning as HydrotactWarning
 
 __version__ = "0.1.0"

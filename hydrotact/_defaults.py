@@ -18,3 +18,15 @@ took 5.8 mm, the ball sunk to twice its radius, which no gantry regime does. A b
 silicone layer is stiffer in the hydroelastic sense than its Young's modulus. Each
 manifest reports the channels' swing next to the published 3-9 kPa. A fitted
 material.json replaces it."""
+
+DEFAULT_POISSON_RATIO = 0.49
+"""Poisson's ratio nu of the elastomer, for barometers that read its stress (receptive
+field `elastic`): cast silicones (Ecoflex, Dragon Skin, Sylgard 184) are nearly
+incompressible, and 0.45-0.499 is what their datasheets and the tactile-sensing
+literature use; 0.49 sits in that range. A sensor file sets its own
+(`"elastomer": {"poisson_ratio": ...}`)."""
+
+DEFAULT_PORT_RADIUS = 0.5e-3
+"""Radius (m) of the Gaussian over which an elastic barometer averages the elastomer's
+stress at its port: a BMP388's vent in its 2.0 x 2.0 mm package is about 1 mm across.
+Our choice; a sensor file sets it per barometer (`receptive_field.port_radius`)."""

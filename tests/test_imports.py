@@ -12,7 +12,7 @@ import pytest
 import hydrotact
 
 PACKAGE = Path(hydrotact.__file__).parent
-STAGES = ("mesh", "field", "contact", "taxel", "visco", "sim", "sysid", "data", "sensors", "datasets", "models")
+STAGES = ("mesh", "field", "contact", "taxel", "elastic", "visco", "sim", "sysid", "data", "sensors", "datasets", "models", "design")
 FORBIDDEN = ("hydrotact.cli", "hydrotact.viz")
 
 

@@ -21,8 +21,7 @@ from hydrotact import HydrotactError
 from hydrotact.cli import main
 from hydrotact.data import write_log
 from hydrotact.sim import FINGERTIP_SENSOR, StageSession, make_site_grid, simulate_stage_log
-from hydrotact.sysid import _press_solve as press_solve_module
-from hydrotact.sysid import compare_fit, fit_press_logs, write_press_fit_outputs
+from hydrotact.sysid import _press_solve as press_solve_module, compare_fit, fit_press_logs, write_press_fit_outputs
 from hydrotact.sysid._press_data import SITE_RESPONSE_SNR, site_responses
 from hydrotact.visco import Prony
 

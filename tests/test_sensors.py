@@ -275,7 +275,7 @@ BROKEN = {
     "negative radius": ("pad5x5", _set(["taxels", 7, "receptive_field", "radius"], -1.1), ["taxels[7].receptive_field.radius: must be > 0, got -1.1"]),
     "half-angle 95 deg": ("sphere8", _set(["taxels", 2, "receptive_field", "half_angle"], 95), ["taxels[2].receptive_field.half_angle: 95 deg is not in (0, 90)"]),
     "zero half-angle": ("sphere8", _set(["taxels", 0, "receptive_field", "half_angle"], 0), ["taxels[0].receptive_field.half_angle: 0 deg is not in (0, 90)"]),
-    "unknown field kind": ("sphere8", _set(["taxels", 1, "receptive_field", "kind"], "ring"), ["taxels[1].receptive_field.kind: must be one of \"disk\", \"cone\", got \"ring\""]),
+    "unknown field kind": ("sphere8", _set(["taxels", 1, "receptive_field", "kind"], "ring"), ["taxels[1].receptive_field.kind: must be one of \"disk\", \"cone\", \"elastic\", got \"ring\""]),
     "duplicate names": ("pad5x5", _set(["taxels", 6, "name"], "b00"), ["taxels[6].name: 'b00' is already the name of taxels[0]"]),
     "unknown part": ("pad5x5", _set(["part"], "BMP999"), ["part: unknown part 'BMP999'; the known parts are BMP388"]),
     "part of wrong type": ("pad5x5", _set(["part"], 388), ["part: must be a string or an object, got 388"]),

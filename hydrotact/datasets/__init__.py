@@ -10,29 +10,18 @@ through the one forward model, `hydrotact.sim.calc_samples`), `PoseEngine` (unit
 responses on local devices or Ray tasks).
 """
 
-from ._compute import PoseEngine as PoseEngine
-from ._compute import compute_block as compute_block
-from ._config import FORCE_DISTRIBUTIONS as FORCE_DISTRIBUTIONS
-from ._config import PHASES as PHASES
-from ._config import DatasetConfig as DatasetConfig
-from ._events import EventPlan as EventPlan
-from ._events import Skin as Skin
-from ._events import calc_approach_thickness as calc_approach_thickness
-from ._events import draw_target_forces as draw_target_forces
-from ._events import find_touchable_skin as find_touchable_skin
-from ._events import pressing_rotation_vectors as pressing_rotation_vectors
-from ._events import sample_events as sample_events
-from ._events import sample_skin_points as sample_skin_points
-from ._generate import GENERATOR as GENERATOR
-from ._generate import PUBLISHED_CHANNEL_STD_PA as PUBLISHED_CHANNEL_STD_PA
-from ._generate import draw_material as draw_material
-from ._generate import generate_dataset as generate_dataset
-from ._session import Presses as Presses
-from ._session import Timeline as Timeline
-from ._session import lay_out_timeline as lay_out_timeline
-from ._session import march_presses as march_presses
-from ._session import run_session as run_session
-from ._store import PLOTS as PLOTS
-from ._store import Dataset as Dataset
-from ._store import load_dataset as load_dataset
-from ._store import read_manifest as read_manifest
+from ._compute import PoseEngine as PoseEngine, compute_block as compute_block
+from ._config import FORCE_DISTRIBUTIONS as FORCE_DISTRIBUTIONS, PHASES as PHASES, DatasetConfig as DatasetConfig
+from ._events import (
+    EventPlan as EventPlan,
+    Skin as Skin,
+    calc_approach_thickness as calc_approach_thickness,
+    draw_target_forces as draw_target_forces,
+    find_touchable_skin as find_touchable_skin,
+    pressing_rotation_vectors as pressing_rotation_vectors,
+    sample_events as sample_events,
+    sample_skin_points as sample_skin_points,
+)
+from ._generate import GENERATOR as GENERATOR, PUBLISHED_CHANNEL_STD_PA as PUBLISHED_CHANNEL_STD_PA, draw_material as draw_material, generate_dataset as generate_dataset
+from ._session import Presses as Presses, Timeline as Timeline, lay_out_timeline as lay_out_timeline, march_presses as march_presses, run_session as run_session
+from ._store import PLOTS as PLOTS, Dataset as Dataset, load_dataset as load_dataset, read_manifest as read_manifest

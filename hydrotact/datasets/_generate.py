@@ -12,7 +12,6 @@ import json
 import time
 from pathlib import Path
 
-import equinox as eqx
 import jax
 import numpy as np
 
@@ -111,13 +110,12 @@ def _resolve_material(material, modulus, config: DatasetConfig, rng) -> tuple:
 
 def _jitter_layout(model, spec, jitter: float, rng):
     """The model with its barometers moved by N(0, jitter) per axis: (model, offsets)."""
-    from ..taxel import make_taxel_layout
+    from ..sim import with_barometer_positions
 
     offsets = jitter * rng.standard_normal((spec.num_taxels, 3))
     if jitter == 0.0:
         return model, offsets
-    layout = make_taxel_layout(spec.taxel_positions_S + offsets, spec.taxel_axes_S, spec.taxel_field_kinds, spec.taxel_field_sizes)
-    return eqx.tree_at(lambda m: m.layout, model, layout), offsets
+    return with_barometer_positions(model, spec, spec.taxel_positions_S + offsets), offsets
 
 
 def _split(timeline, config: DatasetConfig, rng) -> dict:

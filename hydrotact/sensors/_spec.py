@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._defaults import DEFAULT_POISSON_RATIO, DEFAULT_PORT_RADIUS
 from .._errors import HydrotactError
 from .._schemas import format_path, load_schema, parse_json, read_json, validate
 from .._units import LENGTH_UNITS, UNITS
@@ -107,8 +108,12 @@ class SensorSpec:
     - `taxel_names`: (n,) channel names, in channel order.
     - `taxel_positions_S`: (n, 3) sensing ports, metres, frame S.
     - `taxel_axes_S`: (n, 3) unit sensing axes, from the port into the elastomer.
-    - `taxel_field_kinds`: (n,) "disk" or "cone".
-    - `taxel_field_sizes`: (n,) disk radius (m) or cone half-angle (rad).
+    - `taxel_field_kinds`: (n,) "disk", "cone" or "elastic".
+    - `taxel_field_sizes`: (n,) disk radius (m), cone half-angle (rad) or an elastic
+      barometer's port radius (m).
+    - `taxel_elastic_readings`: (n,) what an elastic barometer reads, "pressure" or
+      "normal_stress" ("pressure" for the others, where it means nothing).
+    - `poisson_ratio`: the elastomer's nu, for the elastic barometers.
     - `contact_center_S`: (3,) the point contact angles are measured from, or None;
       `theta_range`, `phi_range`: (low, high) in rad, or None. For the unit vector n
       from the centre to the contact point, theta = asin(-n_y), phi = atan2(n_x, n_z).
@@ -127,10 +132,21 @@ class SensorSpec:
     contact_center_S: np.ndarray | None = None
     theta_range: tuple[float, float] | None = None
     phi_range: tuple[float, float] | None = None
+    taxel_elastic_readings: tuple[str, ...] | None = None
+    poisson_ratio: float = DEFAULT_POISSON_RATIO
+
+    def __post_init__(self):
+        if self.taxel_elastic_readings is None:
+            object.__setattr__(self, "taxel_elastic_readings", ("pressure",) * len(self.taxel_names))
 
     @property
     def num_taxels(self) -> int:
         return len(self.taxel_names)
+
+    @property
+    def is_elastic(self) -> np.ndarray:
+        """(n,) True for the barometers that read the elastomer's stress."""
+        return np.array([kind == "elastic" for kind in self.taxel_field_kinds], dtype=bool)
 
     def make_mesh(self, check: bool = True) -> TetMesh:
         """The elastomer's tet mesh (host; fTetWild for surfaces, cached by input).
@@ -168,10 +184,13 @@ class SensorSpec:
         """The spec as a schema-valid document in SI units (m, rad); :func:`load_sensor`
         reads it back to an equal spec. A surface path is written absolute."""
         taxels = []
-        for name, position, axis, kind, size in zip(
-            self.taxel_names, self.taxel_positions_S, self.taxel_axes_S, self.taxel_field_kinds, self.taxel_field_sizes, strict=True
+        for name, position, axis, kind, size, reading in zip(
+            self.taxel_names, self.taxel_positions_S, self.taxel_axes_S, self.taxel_field_kinds, self.taxel_field_sizes, self.taxel_elastic_readings, strict=True
         ):
-            field = {"kind": "disk", "radius": float(size)} if kind == "disk" else {"kind": "cone", "half_angle": float(size)}
+            if kind == "elastic":
+                field = {"kind": "elastic", "port_radius": float(size), "reading": reading}
+            else:
+                field = {"kind": "disk", "radius": float(size)} if kind == "disk" else {"kind": "cone", "half_angle": float(size)}
             taxels.append(
                 {"name": name, "position": position.tolist(), "axis": axis.tolist(), "receptive_field": field}
             )
@@ -182,6 +201,8 @@ class SensorSpec:
             "geometry": self.geometry.to_json(),
             "part": self.part.to_json(),
         }
+        if self.poisson_ratio != DEFAULT_POISSON_RATIO or self.is_elastic.any():
+            document["elastomer"] = {"poisson_ratio": float(self.poisson_ratio)}
         if self.contact_center_S is not None:
             document["contact_angles"] = {
                 "center": self.contact_center_S.tolist(),
@@ -287,7 +308,7 @@ def _reserved_names() -> frozenset:
 
 
 def _read_taxels(taxels: list, length: float, angle: float, angle_unit: str, source: str):
-    names, positions, axes, kinds, sizes = [], [], [], [], []
+    names, positions, axes, kinds, sizes, readings = [], [], [], [], [], []
     seen = {}
     reserved = _reserved_names()
     for index, taxel in enumerate(taxels):
@@ -305,6 +326,8 @@ def _read_taxels(taxels: list, length: float, angle: float, angle_unit: str, sou
         field = taxel["receptive_field"]
         if field["kind"] == "disk":
             size = float(field["radius"]) * length
+        elif field["kind"] == "elastic":
+            size = float(field.get("port_radius", DEFAULT_PORT_RADIUS / length)) * length
         else:
             half_angle = float(field["half_angle"])
             limit = 90.0 if angle_unit == "deg" else math.pi / 2
@@ -316,7 +339,8 @@ def _read_taxels(taxels: list, length: float, angle: float, angle_unit: str, sou
         axes.append(axis / norm)
         kinds.append(field["kind"])
         sizes.append(size)
-    return tuple(names), np.stack(positions), np.stack(axes), tuple(kinds), np.asarray(sizes, dtype=np.float64)
+        readings.append(field.get("reading", "pressure"))
+    return tuple(names), np.stack(positions), np.stack(axes), tuple(kinds), np.asarray(sizes, dtype=np.float64), tuple(readings)
 
 
 def _read_contact_angles(entry: dict, length: float, angle: float, angle_unit: str, source: str):
@@ -340,7 +364,7 @@ def _from_document(document, source: str, base: Path | None) -> SensorSpec:
     length, angle = LENGTH_SCALES[units["length"]], ANGLE_SCALES[units["angle"]]
     part = _make_part(document["part"], source, ["part"])
     geometry = _make_geometry(document["geometry"], length, units["length"], source, base)
-    names, positions, axes, kinds, sizes = _read_taxels(document["taxels"], length, angle, units["angle"], source)
+    names, positions, axes, kinds, sizes, readings = _read_taxels(document["taxels"], length, angle, units["angle"], source)
     center = theta_range = phi_range = None
     if "contact_angles" in document:
         center, theta_range, phi_range = _read_contact_angles(document["contact_angles"], length, angle, units["angle"], source)
@@ -361,6 +385,8 @@ def _from_document(document, source: str, base: Path | None) -> SensorSpec:
         contact_center_S=center,
         theta_range=theta_range,
         phi_range=phi_range,
+        taxel_elastic_readings=readings,
+        poisson_ratio=float(document.get("elastomer", {}).get("poisson_ratio", DEFAULT_POISSON_RATIO)),
     )
     _check_against_surface(spec)
     return spec

@@ -14,8 +14,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import HydrotactError
-from .._types import Array, Float
+from .._types import Array, Float, Int
 from ..contact import TetClusters, make_tet_clusters
+from ..elastic import ReceptiveFields, make_receptive_fields
 from ..field import PressureField, StrainFieldKind, calc_distance_field, make_laplace_problem, make_pressure_field, solve_strain
 from ..taxel import TaxelLayout, make_taxel_layout
 
@@ -39,6 +40,11 @@ class SensorModel(eqx.Module):
     - `contact_center_S`: (3,) the centre from which contact angles are measured
       (NaN where the sensor defines none, as for a flat pad).
     - `num_rays`: rays per receptive field (static).
+    - `elastic`: the receptive fields of the barometers that read the elastomer's
+      stress (:class:`hydrotact.elastic.ReceptiveFields`), or None when none does.
+    - `elastic_channels`: (num_elastic,) their channel indices, or None.
+    - `uses_rays`: whether any barometer is a ray-cast taxel (static; without one the
+      ray caster is not run).
     """
 
     field: PressureField
@@ -46,6 +52,9 @@ class SensorModel(eqx.Module):
     layout: TaxelLayout
     contact_center_S: Float[Array, " 3"]
     num_rays: int = eqx.field(static=True)
+    elastic: ReceptiveFields | None = None
+    elastic_channels: Int[Array, " num_elastic"] | None = None
+    uses_rays: bool = eqx.field(static=True, default=True)
 
     @property
     def num_taxels(self) -> int:
@@ -93,10 +102,47 @@ def _make_sensor_model(spec, field_kind, num_rays: int, mesh) -> SensorModel:
     else:
         strain = jnp.asarray(calc_distance_field(mesh, source=spec.name))
     center = spec.contact_center_S
-    return SensorModel(
+    model = SensorModel(
         field=make_pressure_field(mesh, strain, 1.0),
         clusters=make_tet_clusters(mesh.vertices, mesh.tets),
-        layout=make_taxel_layout(spec.taxel_positions_S, spec.taxel_axes_S, spec.taxel_field_kinds, spec.taxel_field_sizes),
+        layout=make_ray_layout(spec, spec.taxel_positions_S),
         contact_center_S=jnp.asarray(np.full(3, np.nan) if center is None else np.asarray(center, dtype=np.float64)),
         num_rays=int(num_rays),
+        uses_rays=bool(not spec.is_elastic.all()),
+    )
+    return with_barometer_positions(model, spec, spec.taxel_positions_S, mesh=mesh)
+
+
+def make_ray_layout(spec, positions_S) -> TaxelLayout:
+    """The ray-cast taxels' layout of a spec's barometers at `positions_S` (host). An
+    elastic barometer keeps its place in it as a disk of its port's radius, whose
+    reading the elastic one replaces."""
+    kinds = tuple("disk" if kind == "elastic" else kind for kind in spec.taxel_field_kinds)
+    return make_taxel_layout(positions_S, spec.taxel_axes_S, kinds, spec.taxel_field_sizes)
+
+
+def with_barometer_positions(model: SensorModel, spec, positions_S, mesh=None, progress: bool = False) -> SensorModel:
+    """`model` with the spec's barometers at `positions_S` (n, 3) m (host): the ray
+    layout moved, and the elastic barometers' receptive fields solved for the new
+    ports (cached by content; :func:`hydrotact.elastic.make_receptive_fields`)."""
+    positions_S = np.asarray(positions_S, dtype=np.float64)
+    model = eqx.tree_at(lambda m: m.layout, model, make_ray_layout(spec, positions_S))
+    elastic = spec.is_elastic
+    if not elastic.any():
+        return model
+    if mesh is None:
+        mesh = spec.make_mesh()
+    channels = np.flatnonzero(elastic)
+    fields = make_receptive_fields(
+        mesh,
+        positions_S[channels],
+        spec.taxel_axes_S[channels],
+        spec.taxel_field_sizes[channels],
+        [spec.taxel_elastic_readings[k] for k in channels],
+        spec.poisson_ratio,
+        progress=progress,
+        source=spec.name,
+    )
+    return eqx.tree_at(
+        lambda m: (m.elastic, m.elastic_channels), model, (fields, jnp.asarray(channels)), is_leaf=lambda leaf: leaf is None
     )

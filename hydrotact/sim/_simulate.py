@@ -2,7 +2,8 @@
 barometers report, the contact wrench and the labels (pure).
 
 Per sample: the contact surface of the probe and the elastomer (unit modulus), what
-each taxel reads of it, the wrench on the sensor, the contact normal and location.
+each barometer reads of it (a ray-cast taxel the skin pressure in its receptive field,
+an elastic barometer the stress its tractions cause at its port, by reciprocity), the wrench on the sensor, the contact normal and location.
 Everything but the contact flag is linear in E or independent of it, so the unit
 response is computed once per pose and the material acts on it: a Prony relaxation
 modulus through the hereditary integral (an elastic material is a Prony series with no
@@ -33,6 +34,7 @@ from .._buffers import AbstractCapacity
 from .._math import safe_div, safe_norm
 from .._types import Array, Bool, Float, Int
 from ..contact import Capacity, Pose, calc_contact_surface, map_over_poses
+from ..elastic import calc_elastic_readings
 from ..taxel import TaxelCapacity, calc_taxel_pressures
 from ..visco import BarometerSignal, Prony, calc_barometer_readings, calc_contact_response
 from ._model import SensorModel
@@ -122,21 +124,29 @@ def calc_unit_response(model: SensorModel, probe, X_SR: Pose, capacity: SimCapac
     """The unit-modulus response of the sensor to the probe at pose X_SR (pure;
     jittable, vmappable over X_SR, differentiable in X_SR, the field and the layout)."""
     surface = calc_contact_surface(model.field, probe, X_SR, capacity.contact, model.clusters)
-    readings = calc_taxel_pressures(model.layout, surface, model.num_rays, capacity.taxel)
+    if model.uses_rays:
+        readings = calc_taxel_pressures(model.layout, surface, model.num_rays, capacity.taxel)
+        pressures, taxel_overflow, taxel_needed = readings.pressures, readings.did_overflow, readings.needed
+    else:
+        dtype = surface.areas.dtype
+        pressures = jnp.zeros(model.num_taxels, dtype)
+        taxel_overflow, taxel_needed = jnp.asarray(False), jnp.zeros(2, surface.needed.dtype)
+    if model.elastic is not None:
+        pressures = pressures.at[model.elastic_channels].set(calc_elastic_readings(model.elastic, surface))
     force_on_soft, torque_on_soft = surface.calc_wrench()
     weights = jnp.where(surface.valid, surface.pressure_integrals, 0.0)
     gradients = model.field.calc_tet_pressure_gradients()[jnp.maximum(surface.tet_index, 0)]
     inward = jnp.sum(weights[:, None] * gradients, axis=0)
     inward = safe_div(inward, safe_norm(inward))
     return UnitResponse(
-        taxel_pressures=readings.pressures,
+        taxel_pressures=pressures,
         force_S=force_on_soft,
         torque_S=torque_on_soft,
         normal_S=inward,
         contact_point_S=surface.pressure_centroid_S,
         area=surface.total_area,
-        did_overflow=surface.did_overflow | readings.did_overflow,
-        needed=jnp.concatenate([surface.needed, readings.needed]),
+        did_overflow=surface.did_overflow | taxel_overflow,
+        needed=jnp.concatenate([surface.needed, taxel_needed]),
     )
 
 

@@ -1,0 +1,381 @@
+"""The elastic stage: linear elasticity on P2 tets (mixed P2-P0) and barometers'
+receptive fields by reciprocity, checked against closed forms (Boussinesq, Cerruti,
+Hertz), scikit-fem's mixed assembly on the same mesh, and central differences."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from hydrotact import elastic
+from hydrotact.field import calc_tet_gradients
+from hydrotact.mesh import FREE, TetMesh, make_box
+
+# ---------------------------------------------------------------- closed forms
+# Half-space z < 0, surface z = 0, a point force at the origin; depth zeta = -z.
+
+
+def boussinesq_u(x, nu, shear, force=1.0):
+    """Boussinesq: a normal force `force` pushing into the half-space (along -z)."""
+    zeta = -x[2]
+    radius = jnp.sqrt(x[0] ** 2 + x[1] ** 2 + zeta**2)
+    c = force / (4.0 * jnp.pi * shear)
+    radial = c * (zeta / radius**3 - (1.0 - 2.0 * nu) / (radius * (radius + zeta)))
+    return jnp.stack([radial * x[0], radial * x[1], -c * (zeta**2 / radius**3 + 2.0 * (1.0 - nu) / radius)])
+
+
+def cerruti_u(x, nu, shear, force=1.0):
+    """Cerruti: a tangential force `force` along +x on the surface (Johnson, eq. 2.19)."""
+    X, Y, zeta = x[0], x[1], -x[2]
+    r = jnp.sqrt(X**2 + Y**2 + zeta**2)
+    c, k = force / (4.0 * jnp.pi * shear), 1.0 - 2.0 * nu
+    ux = c * (1 / r + X**2 / r**3 + k * (1 / (r + zeta) - X**2 / (r * (r + zeta) ** 2)))
+    uy = c * (X * Y / r**3 - k * X * Y / (r * (r + zeta) ** 2))
+    uz = c * (X * zeta / r**3 + k * X / (r * (r + zeta)))
+    return jnp.stack([ux, uy, -uz])
+
+
+def exact_stress(displacement, x, nu, shear):
+    gradient = jax.jacfwd(displacement)(x, nu, shear)
+    strain = 0.5 * (gradient + gradient.T)
+    lam = 2.0 * shear * nu / (1.0 - 2.0 * nu)
+    return lam * jnp.trace(strain) * jnp.eye(3) + 2.0 * shear * strain
+
+
+def exact_pressure(displacement, points, nu):
+    shear = 1.0 / (2.0 * (1.0 + nu))
+    return np.asarray(jax.vmap(lambda x: -jnp.trace(exact_stress(displacement, x, nu, shear)) / 3.0)(jnp.asarray(points)))
+
+
+@pytest.mark.parametrize("displacement", [boussinesq_u, cerruti_u])
+def test_closed_forms_are_elastic_equilibria_with_a_free_surface(displacement):
+    """The closed forms themselves (as written here): div sigma = 0 inside, no traction
+    on the surface off the load, a unit resultant, and the hydrostatic pressure
+    (1 + nu) P zeta / (3 pi rho^3) (Boussinesq) or (1 + nu) Q x / (3 pi rho^3) (Cerruti)."""
+    nu = 0.3
+    shear = 1.0 / (2.0 * (1.0 + nu))
+    rng = np.random.default_rng(4)
+    inside = rng.normal(size=(6, 3))
+    inside[:, 2] = -np.abs(inside[:, 2]) - 0.1
+    divergence = jax.vmap(lambda x: jnp.einsum("ijj->i", jax.jacfwd(lambda y: exact_stress(displacement, y, nu, shear))(x)))(jnp.asarray(inside))
+    assert np.abs(divergence).max() < 1e-12
+    surface = inside.copy()
+    surface[:, 2] = 0.0
+    traction = jax.vmap(lambda x: exact_stress(displacement, x, nu, shear)[:, 2])(jnp.asarray(surface))
+    assert np.abs(traction).max() < 1e-12
+    theta, phi = np.meshgrid((np.arange(240) + 0.5) * (np.pi / 2 / 240), np.arange(480) * (2 * np.pi / 480), indexing="ij")
+    normals = np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), -np.cos(theta)], -1).reshape(-1, 3)
+    areas = (np.sin(theta) * (np.pi / 2 / 240) * (2 * np.pi / 480)).reshape(-1)
+    stresses = jax.vmap(lambda x: exact_stress(displacement, x, nu, shear))(jnp.asarray(normals))
+    resultant = np.einsum("qij,qj,q->i", stresses, normals, areas)  # what holds the hemisphere against the load
+    expected = [0.0, 0.0, 1.0] if displacement is boussinesq_u else [-1.0, 0.0, 0.0]
+    np.testing.assert_allclose(resultant, expected, atol=1e-4)
+    radius = np.linalg.norm(inside, axis=1)
+    along = -inside[:, 2] if displacement is boussinesq_u else inside[:, 0]
+    np.testing.assert_allclose(exact_pressure(displacement, inside, nu), (1 + nu) * along / (3 * np.pi * radius**3), rtol=1e-12)
+
+
+def _sub_block(edge, nu, displacement, size=4e-3, height=2e-3, gap=1.5e-3, ports=None):
+    """Solve on a block of the half-space below the load (z in [-gap - height, -gap]),
+    with the closed form's displacement on its sides and bottom and its traction on
+    the top: the FE solution converges to the closed form, singularity excluded.
+
+    **Returns:** (relative max displacement error at the nodes, relative errors of the
+    port readings against the same port functional of the exact tet-mean pressures,
+    relative L2 error of the tets' pressures, CG steps)."""
+    box = make_box((size, size, height), edge, sides="core")
+    vertices = np.asarray(box.vertices).copy()
+    vertices[:, 2] -= height + gap
+    mesh = TetMesh(vertices, box.tets, box.boundary_faces, box.face_tags)
+    problem = elastic.make_elastic_problem(mesh, nu)
+    shear = 1.0 / (2.0 * (1.0 + nu))
+    nodes = problem.calc_node_positions()
+    exact = np.asarray(jax.vmap(displacement, in_axes=(0, None, None))(nodes, nu, shear))
+    quadrature = elastic.make_face_quadrature(problem, mesh.faces_tagged(FREE))
+    stresses = jax.vmap(lambda x: exact_stress(displacement, x, nu, shear))(quadrature.points_S)
+    loads = elastic.calc_face_loads(problem, quadrature, jnp.einsum("qij,qj->qi", stresses, quadrature.normals_S))
+    solution = elastic.solve_elasticity(problem, loads, dirichlet_values=exact)
+    u_error = np.abs(np.asarray(solution.displacements) - exact).max() / np.abs(exact).max()
+    tets = np.asarray(mesh.tets)
+    points = np.einsum("qi,tid->tqd", elastic._problem.TET_QUADRATURE, vertices[tets])
+    tet_means = exact_pressure(displacement, points.reshape(-1, 3), nu).reshape(-1, 4).mean(axis=1)
+    _, volumes = calc_tet_gradients(jnp.asarray(vertices), jnp.asarray(tets))
+    volumes = np.asarray(volumes)
+    p_error = np.sqrt(np.sum(volumes * (np.asarray(solution.pressures) - tet_means) ** 2) / np.sum(volumes * tet_means**2))
+    read_error = None
+    if ports is not None:
+        readings = np.asarray(elastic.calc_port_readings(problem, solution.displacements, ports))
+        weights = np.asarray(elastic.calc_port_weights(jnp.asarray(vertices), jnp.asarray(tets), ports))
+        expected = weights @ tet_means
+        read_error = np.abs(readings - expected).max() / np.abs(expected).max()
+    return u_error, read_error, p_error, int(solution.num_steps)
+
+
+_PORTS = elastic.make_barometer_ports(
+    [[0.0, 0.0, -2.3e-3], [0.7e-3, 0.3e-3, -2.5e-3], [-0.9e-3, 0.5e-3, -2.8e-3], [0.2e-3, -0.8e-3, -3.0e-3]],
+    np.tile([0.0, 0.0, 1.0], (4, 1)),
+    np.full(4, 0.5e-3),
+)
+
+
+@pytest.mark.parametrize("displacement", [boussinesq_u, cerruti_u])
+def test_converges_to_the_closed_form_at_the_element_order_without_locking(displacement):
+    """Boussinesq and Cerruti: displacements and port readings converge at second
+    order in h (P2 displacements, P0 pressure: the pressure's L2 error is first
+    order); at nu = 0.49 and 0.499 the displacement and port errors stay within 2x of
+    those at nu = 0.3 (no locking)."""
+    coarse = _sub_block(1e-3, 0.3, displacement, ports=_PORTS)
+    fine = _sub_block(0.5e-3, 0.3, displacement, ports=_PORTS)
+    u_order = np.log2(coarse[0] / fine[0])
+    read_order = np.log2(coarse[1] / fine[1])
+    p_order = np.log2(coarse[2] / fine[2])
+    assert u_order > 1.3, (coarse, fine)
+    assert read_order > 1.4, (coarse, fine)
+    assert p_order > 0.9, (coarse, fine)
+    assert fine[1] < 0.03
+    for nu in (0.49, 0.499):
+        nearly = _sub_block(0.5e-3, nu, displacement, ports=_PORTS)
+        assert nearly[0] < 2.0 * fine[0], (nu, nearly, fine)
+        assert nearly[1] < 2.0 * fine[1], (nu, nearly, fine)
+
+
+def _skfem_mixed(mesh, nu, modulus, traction, body):
+    """scikit-fem's mixed P2-P0 assembly (quadratic vector displacements, one
+    pressure per tet), the block saddle-point system solved directly."""
+    import scipy.sparse as sp
+    import skfem
+    from skfem.helpers import ddot, div, sym_grad, trace
+
+    m = skfem.MeshTet(np.asarray(mesh.vertices).T.copy(), np.asarray(mesh.tets).T.copy())
+    basis_u = skfem.Basis(m, skfem.ElementVector(skfem.ElementTetP2()), intorder=4)
+    basis_p = skfem.Basis(m, skfem.ElementTetP0(), intorder=4)
+    mu, kappa = modulus / (2 * (1 + nu)), modulus / (3 * (1 - 2 * nu))
+
+    @skfem.BilinearForm
+    def deviatoric(u, v, w):
+        eu, ev = sym_grad(u), sym_grad(v)
+        return 2 * mu * (ddot(eu, ev) - trace(eu) * trace(ev) / 3)
+
+    @skfem.BilinearForm
+    def divergence(u, q, w):
+        return div(u) * q
+
+    @skfem.BilinearForm
+    def compliance(p, q, w):
+        return p * q / kappa
+
+    @skfem.LinearForm
+    def surface(v, w):
+        t = traction(w.x)
+        return t[0] * v[0] + t[1] * v[1] + t[2] * v[2]
+
+    @skfem.LinearForm
+    def gravity(v, w):
+        return body[0] * v[0] + body[1] * v[1] + body[2] * v[2]
+
+    loaded = np.intersect1d(m.facets_satisfying(lambda x: np.abs(x[2]) > 1e-9), m.boundary_facets())
+    f = surface.assemble(skfem.FacetBasis(m, basis_u.elem, facets=loaded, intorder=6)) + gravity.assemble(basis_u)
+    B = divergence.assemble(basis_u, basis_p)
+    system = sp.bmat([[deviatoric.assemble(basis_u), -B.T], [-B, -compliance.assemble(basis_p)]], format="csc")
+    fixed = basis_u.get_dofs(m.facets_satisfying(lambda x: np.abs(x[2]) < 1e-9)).all()
+    x = skfem.solve(*skfem.condense(system, np.concatenate([f, np.zeros(basis_p.N)]), D=fixed))
+    return basis_u, x[: basis_u.N], x[basis_u.N :]
+
+
+@pytest.mark.parametrize("nu", [0.3, 0.499])
+def test_agrees_with_scikit_fem_on_the_same_mesh(nu):
+    """Displacements at every P2 node and the tets' pressures agree with scikit-fem's
+    mixed P2-P0 solve to 1e-8 relative (linear tractions on the skin, gravity)."""
+    from scipy.spatial import cKDTree
+
+    mesh = make_box((4e-3, 3e-3, 2e-3), 1e-3)
+    modulus, body = 1e5, (0.0, 50.0, -200.0)
+
+    def traction(x):
+        return [0.3 + 0 * x[0], 0.1 * x[1] / 1e-3, -(1.0 + x[0] / 4e-3)]
+
+    problem = elastic.make_elastic_problem(mesh, nu)
+    quadrature = elastic.make_face_quadrature(problem, mesh.faces_tagged(FREE))
+    tractions = np.stack(traction(np.asarray(quadrature.points_S).T), axis=-1)
+    loads = elastic.calc_face_loads(problem, quadrature, tractions) + elastic.calc_body_loads(problem, body)
+    solution = elastic.solve_elasticity(problem, loads, modulus=modulus, rtol=1e-13)
+    basis, u_ref, p_ref = _skfem_mixed(mesh, nu, modulus, traction, body)
+    distance, node = cKDTree(np.asarray(problem.calc_node_positions())).query(basis.doflocs.T)
+    assert distance.max() == 0.0
+    ours = np.zeros(basis.N)
+    for k, indices in enumerate(basis.split_indices()):
+        ours[indices] = np.asarray(solution.displacements)[node[indices], k]
+    assert np.abs(ours - u_ref).max() <= 1e-8 * np.abs(u_ref).max()
+    assert np.abs(np.asarray(solution.pressures) - p_ref).max() <= 1e-8 * np.abs(p_ref).max()
+    # stress recovered at the centroids is the mixed form's: tr(sigma) / 3 = -p
+    stress = elastic.calc_stress(problem, solution, modulus=modulus)
+    np.testing.assert_allclose(-np.trace(np.asarray(stress), axis1=1, axis2=2) / 3, np.asarray(solution.pressures), rtol=1e-12, atol=1e-12 * np.abs(p_ref).max())
+
+
+# ------------------------------------------------------- reciprocity and gradients
+
+
+@pytest.fixture(scope="module")
+def pad():
+    """A coarse pad (the pad5x5 block at 2 mm cells), a sphere pressed off-axis into
+    it, and four ports (pressure and normal stress) under the board's skin."""
+    from hydrotact.contact import make_pose, make_sphere_probe
+    from hydrotact.field import make_laplace_problem, make_pressure_field, solve_strain
+    from hydrotact.mesh import make_seed_mesh
+
+    mesh = make_seed_mesh("pad5x5", 2.2e-3)
+    field = make_pressure_field(mesh, solve_strain(make_laplace_problem(mesh)).strain, 1e5)
+    probe = make_sphere_probe(3e-3, subdivisions=2)
+    ports = elastic.make_barometer_ports(
+        [[0.3e-3, -0.2e-3, 0.0], [2.2e-3, 0.0, 0.0], [-2.2e-3, 2.2e-3, 0.4e-3], [0.0, -4.4e-3, 0.0]],
+        [[0.0, 0.0, 1.0], [0.2, 0.0, 1.0], [0.0, -0.3, 1.0], [0.0, 0.0, 1.0]],
+        [0.5e-3, 0.7e-3, 0.5e-3, 0.6e-3],
+        ["pressure", "normal_stress", "pressure", "normal_stress"],
+    )
+    X_SR = make_pose([0.37e-3, -0.21e-3, 4e-3 - 0.61e-3])
+    return mesh, field, probe, ports, X_SR
+
+
+def _readings(mesh, field, probe, ports, X_SR, nu=0.49):
+    from hydrotact.contact import Capacity, calc_contact_surface
+
+    problem = elastic.make_elastic_problem(mesh, nu)
+    fields = elastic.calc_receptive_fields(problem, ports, rtol=1e-12)
+    surface = calc_contact_surface(field, probe, X_SR, Capacity(512, 512, 4096, 4096))
+    return problem, fields, surface, elastic.calc_elastic_readings(fields, surface)
+
+
+def test_reading_by_reciprocity_equals_the_direct_solve(pad):
+    """A contact surface's readings from the receptive fields equal those of the
+    direct solve with its tractions as loads (Maxwell-Betti), to the solver's
+    tolerance; the consistent loads sum to the surface's force."""
+    mesh, field, probe, ports, X_SR = pad
+    problem, fields, surface, readings = _readings(mesh, field, probe, ports, X_SR)
+    assert not bool(surface.did_overflow) and int(surface.num_polygons) > 10
+    loads = elastic.calc_surface_loads(problem, surface)
+    np.testing.assert_allclose(np.asarray(jnp.sum(loads, axis=0)), np.asarray(surface.calc_force()), rtol=1e-12)
+    direct = elastic.solve_elasticity(problem, loads, rtol=1e-12)
+    expected = elastic.calc_port_readings(problem, direct.displacements, ports)
+    np.testing.assert_allclose(np.asarray(readings), np.asarray(expected), rtol=1e-8)
+    assert np.all(np.asarray(readings)[[0, 2]] > 0.0)  # compression under the press
+    assert float(fields.relative_residual) < 1e-9
+
+
+def _central(f, x, step):
+    """The central difference of f at x along `step` (a scalar or a vector), per unit step."""
+    return (f(x + step) - f(x - step)) / (2.0 * float(np.linalg.norm(step)))
+
+
+def test_readings_gradients_match_central_differences(pad):
+    """d reading / d (pose, nu, a port's position, a port's axis) by the implicit
+    adjoint against central differences."""
+    from hydrotact.contact import Capacity, calc_contact_surface, make_pose
+
+    mesh, field, probe, ports, X_SR = pad
+    problem = elastic.make_elastic_problem(mesh, 0.49)
+    capacity = Capacity(512, 512, 4096, 4096)
+    translation = np.asarray(X_SR.translation)
+
+    def reading(translation, nu, position, axis, channel):
+        moved = eqx_tree_at_ports(ports, position, axis, channel)
+        fields = elastic.calc_receptive_fields(problem, moved, poisson_ratio=nu, rtol=1e-13)
+        surface = calc_contact_surface(field, probe, make_pose(translation), capacity)
+        return elastic.calc_elastic_readings(fields, surface)[channel]
+
+    args = (jnp.asarray(translation), jnp.asarray(0.49), jnp.asarray(ports.positions_S[1]), jnp.asarray(ports.axes_S[1]))
+    grads = jax.grad(reading, argnums=(0, 1, 2, 3))(*args, 1)
+    e = np.eye(3)
+    for k, step in ((0, 1e-7), (2, 1e-7)):
+        fd = _central(lambda t: float(reading(t, args[1], args[2], args[3], 1)), args[0], step * e[k])
+        np.testing.assert_allclose(float(grads[0][k]), fd, rtol=2e-5)
+    fd_nu = _central(lambda nu: float(reading(args[0], nu, args[2], args[3], 1)), 0.49, 1e-6)
+    np.testing.assert_allclose(float(grads[1]), fd_nu, rtol=1e-5)
+    for k in (0, 2):
+        fd = _central(lambda p: float(reading(args[0], args[1], p, args[3], 1)), args[2], 1e-7 * e[k])
+        np.testing.assert_allclose(float(grads[2][k]), fd, rtol=1e-5)
+    fd_axis = _central(lambda a: float(reading(args[0], args[1], args[2], a, 1)), args[3], 1e-6 * e[0])
+    np.testing.assert_allclose(float(grads[3][0]), fd_axis, rtol=1e-5)
+
+
+def eqx_tree_at_ports(ports, position, axis, channel):
+    import equinox as eqx
+
+    return eqx.tree_at(
+        lambda p: (p.positions_S, p.axes_S), ports, (jnp.asarray(ports.positions_S).at[channel].set(position), jnp.asarray(ports.axes_S).at[channel].set(axis))
+    )
+
+
+# -------------------------------------------------------------- in the forward model
+
+
+def _pad_document(kinds):
+    """pad5x5 at 2.2 mm cells, its barometers of the given receptive-field kinds."""
+    from hydrotact.sensors._builtins import builtin_documents
+
+    document = builtin_documents()["pad5x5"]
+    document["name"] = "coarse-pad"
+    document["geometry"]["edge_length"] = 2.2
+    document["elastomer"] = {"poisson_ratio": 0.48}
+    for taxel, kind in zip(document["taxels"], kinds, strict=True):
+        if kind == "elastic":
+            taxel["receptive_field"] = {"kind": "elastic", "port_radius": 0.6, "reading": "pressure"}
+    return document
+
+
+def test_elastic_barometers_in_the_forward_model(tmp_path):
+    """A sensor file with elastic barometers: read back equal, simulated through the
+    one forward model. A press at the pad's centre moves every elastic channel (the
+    stress spreads through the rubber; a disk under the same press sees nothing past
+    its radius), the nearest most; readings scale with E; the disk channels of a mixed
+    sensor read what they read on an all-disk sensor; the fields come from the cache
+    the second time."""
+    from hydrotact.contact import make_sphere_probe
+    from hydrotact.sensors import load_sensor
+    from hydrotact.sim import make_sensor_model, make_trajectory, simulate
+    from hydrotact.visco import make_prony
+
+    kinds = ["elastic" if k % 2 == 0 else "disk" for k in range(25)]
+    spec = load_sensor(_pad_document(kinds))
+    assert spec.poisson_ratio == 0.48 and spec.is_elastic.sum() == 13
+    again = load_sensor(spec.to_json())
+    assert again.to_json() == spec.to_json() and again.taxel_elastic_readings == spec.taxel_elastic_readings
+    np.testing.assert_allclose(again.taxel_field_sizes[0], 0.6e-3)
+
+    probe = make_sphere_probe(3e-3, subdivisions=2)
+    depths = np.array([0.0, 0.2e-3, 0.45e-3])
+    trajectory = make_trajectory(np.arange(3) * 0.01, np.stack([np.full(3, 0.1e-3), np.full(3, -0.05e-3), 4e-3 - depths], axis=1))
+    mixed = make_sensor_model(spec)
+    assert mixed.uses_rays and mixed.elastic.num_barometers == 13
+    samples = simulate(mixed, make_prony(1e5), probe, trajectory, cache=False)
+    pressures = np.asarray(samples.taxel_pressures)
+    assert np.all(pressures[0] == 0.0)
+    elastic_readings = pressures[2, spec.is_elastic]
+    assert np.all(elastic_readings > 0.0)
+    assert np.argmax(pressures[2]) == 12  # b22, under the press
+    disks = make_sensor_model(load_sensor(_pad_document(["disk"] * 25)))
+    disk_samples = simulate(disks, make_prony(1e5), probe, trajectory, cache=False)
+    np.testing.assert_allclose(pressures[:, ~spec.is_elastic], np.asarray(disk_samples.taxel_pressures)[:, ~spec.is_elastic], rtol=1e-12, atol=0.0)
+    assert np.sum(np.asarray(disk_samples.taxel_pressures)[2] > 0.0) < 13  # a disk sees only what lies over it
+    stiffer = simulate(mixed, make_prony(2e5), probe, trajectory, cache=False)
+    np.testing.assert_allclose(np.asarray(stiffer.taxel_pressures), 2.0 * pressures, rtol=1e-12)
+
+    from hydrotact.elastic import _cache
+
+    calls = []
+    original = _cache._solve_fields
+    try:
+        _cache._solve_fields = lambda *args: calls.append(1) or original(*args)
+        all_elastic = load_sensor(_pad_document(["elastic"] * 25))
+        first = make_sensor_model(all_elastic)
+        assert not first.uses_rays
+        from hydrotact.sim import _model
+
+        _model._MODELS.clear()
+        second = make_sensor_model(all_elastic)
+    finally:
+        _cache._solve_fields = original
+    assert len(calls) == 1
+    np.testing.assert_array_equal(np.asarray(first.elastic.responses), np.asarray(second.elastic.responses))
+    # the elastic channels of the mixed sensor are those of the all-elastic one
+    all_samples = simulate(second, make_prony(1e5), probe, trajectory, cache=False)
+    np.testing.assert_allclose(np.asarray(all_samples.taxel_pressures)[:, spec.is_elastic], pressures[:, spec.is_elastic], rtol=1e-6)
