@@ -28,7 +28,7 @@ import pytest
 ROOT = Path(__file__).parents[1]
 DOCS = ROOT / "docs"
 PAGES = ["sensors.md", "fit.md", "generate.md", "train.md", "design.md"]  # in the order a user meets them
-STAGES = ["mesh", "field", "contact", "taxel", "sensors", "visco", "sim", "sysid", "data", "datasets", "models", "design", "viz"]
+STAGES = ["mesh", "field", "contact", "taxel", "elastic", "sensors", "visco", "sim", "sysid", "data", "datasets", "models", "design", "viz"]
 
 # The dataset regime's sphere, coarse (fewer contact polygons), as tests/test_design.py uses it.
 COARSE_SPHERE = "sphere:r=3mm,subdivisions=1"

@@ -30,6 +30,10 @@ from ._loads import (
     find_face_tets as find_face_tets,
     make_face_quadrature as make_face_quadrature,
 )
+from ._multigrid import (
+    MultigridPreconditioner as MultigridPreconditioner,
+    make_multigrid_preconditioner as make_multigrid_preconditioner,
+)
 from ._problem import (
     ElasticProblem as ElasticProblem,
     ElasticSolution as ElasticSolution,

@@ -45,7 +45,6 @@ from ._problem import (
     _default_rtol,
     calc_element_operators,
     calc_lame,
-    calc_reduced_system,
     solve_reduced,
 )
 from ._quadratic import calc_shape_functions, calc_shape_gradients
@@ -164,14 +163,14 @@ class ReceptiveFields(eqx.Module):
 
 
 @eqx.filter_jit
-def _fields(problem, ports, vertices, nu, rtol, max_steps, throw):
-    operator_fn, inverse, _ = calc_reduced_system(problem, vertices, nu, jnp.asarray(1.0, vertices.dtype))
+def _fields(problem, ports, vertices, nu, rtol, max_steps, throw, multigrid):
     zeros = jnp.zeros((problem.num_nodes, 3), vertices.dtype)
     _, pullback = jax.vjp(lambda u: calc_port_readings(problem, u, ports, nu, vertices), zeros)
     eye = jnp.eye(ports.num_barometers, dtype=vertices.dtype)
     (functionals,) = jax.vmap(pullback)(eye)  # (B, num_nodes, 3): reading = g . u
     mask = (~problem.is_fixed).astype(vertices.dtype)[None, :, None]
-    solve = jax.vmap(lambda rhs: solve_reduced(operator_fn, inverse, rhs, rtol, max_steps, throw))
+    params = (vertices, nu, jnp.asarray(1.0, vertices.dtype))
+    solve = jax.vmap(lambda rhs: solve_reduced(problem, params, rhs, rtol, max_steps, throw, multigrid))
     responses, num_steps, relative, result = solve(mask * functionals)
     return ReceptiveFields(
         vertices=vertices,
@@ -192,19 +191,21 @@ def calc_receptive_fields(
     rtol: float | None = None,
     max_steps: int | None = None,
     throw: bool = True,
+    multigrid=None,
 ) -> ReceptiveFields:
     """Every barometer's receptive field, one adjoint solve each (jittable;
     differentiable in the ports' positions, axes and radii, nu and the vertices).
 
     **Arguments:** `problem` from :func:`make_elastic_problem`; `ports` from
-    :func:`make_barometer_ports`; the rest as :func:`solve_elasticity`'s.
+    :func:`make_barometer_ports`; the rest (`multigrid` too) as
+    :func:`solve_elasticity`'s.
     """
     vertices = jnp.asarray(problem.vertices if vertices is None else vertices)
     dtype = vertices.dtype
     nu = jnp.asarray(problem.poisson_ratio if poisson_ratio is None else poisson_ratio, dtype)
     rtol = _default_rtol(dtype) if rtol is None else rtol
     max_steps = 20 * problem.num_nodes + 1000 if max_steps is None else max_steps
-    fields, result = _fields(problem, ports, vertices, nu, rtol, max_steps, throw)
+    fields, result = _fields(problem, ports, vertices, nu, rtol, max_steps, throw, multigrid)
     del result  # raised inside the solve when `throw`; per-solve codes are not kept
     return fields
 

@@ -4,7 +4,8 @@
 The fields depend only on the mesh (vertices, tets, tags), nu and the ports; the key is
 a digest of exactly those, so an edited mesh or a moved barometer solves again and
 anything else reads the file back. Barometers are solved one at a time (one compiled
-program serves them all) behind a progress bar; each file is written atomically.
+program serves them all), by CG preconditioned with one multigrid hierarchy
+(:mod:`._multigrid`), behind a progress bar; each file is written atomically.
 """
 
 import zipfile
@@ -17,6 +18,7 @@ from .._errors import HydrotactError, where
 from .._files import atomic_path, cache_dir, digest
 from ..mesh import TetMesh
 from ._barometers import ReceptiveFields, calc_receptive_fields, make_barometer_ports
+from ._multigrid import make_multigrid_preconditioner
 from ._problem import make_elastic_problem
 
 _CACHE_VERSION = "elastic-fields/1"
@@ -94,9 +96,12 @@ def _solve_fields(problem, ports, progress: bool, source):
     count = ports.num_barometers
     bar = tqdm(total=count, desc=f"elastic receptive fields ({problem.num_unknowns} unknowns)", unit="barometer", disable=not progress, leave=False)
     with bar:
+        bar.set_postfix_str("building the multigrid hierarchy")
+        multigrid = make_multigrid_preconditioner(problem)
+        bar.set_postfix_str(f"{multigrid.num_levels} levels")
         for b in range(count):
             one = type(ports)(*(np.asarray(leaf)[b : b + 1] for leaf in (ports.positions_S, ports.axes_S, ports.port_radii, ports.reads_normal_stress)))
-            fields = calc_receptive_fields(problem, one, rtol=rtol, max_steps=max_steps, throw=False)
+            fields = calc_receptive_fields(problem, one, rtol=rtol, max_steps=max_steps, throw=False, multigrid=multigrid)
             relative = float(fields.relative_residual)
             if not (np.isfinite(relative) and relative <= _RESIDUAL_SLACK * rtol):
                 raise HydrotactError(

@@ -40,7 +40,6 @@ from ..field import calc_tet_gradients
 from ..mesh import CORE, TetMesh
 from ._quadratic import (
     BlockPattern,
-    apply_blocks,
     calc_node_positions,
     calc_shape_gradients,
     make_block_pattern,
@@ -193,50 +192,129 @@ def _default_rtol(dtype) -> float:
     return 1e-10 if jnp.dtype(dtype) == jnp.float64 else 1e-5
 
 
+def calc_diagonal_blocks(problem: ElasticProblem, vertices, poisson_ratio, modulus=1.0):
+    """The 3 x 3 diagonal blocks of K, (num_nodes, 3, 3)."""
+    mu, kappa = calc_lame(modulus, poisson_ratio)
+    gradients, weights, mean_gradients = calc_element_operators(problem, vertices)
+    dot = jnp.einsum("tq,tqad,tqad->ta", weights, gradients, gradients)
+    cross = jnp.einsum("tq,tqal,tqak->takl", weights, gradients, gradients)  # symmetric in k, l
+    eye = jnp.eye(3, dtype=vertices.dtype)
+    volumes = jnp.sum(weights, axis=1)
+    blocks = mu * (dot[..., None, None] * eye[None, None] + cross / 3.0)
+    blocks = blocks + kappa * volumes[:, None, None, None] * jnp.einsum("tak,tal->takl", mean_gradients, mean_gradients)
+    return jax.ops.segment_sum(blocks.reshape(-1, 3, 3), problem.tet_nodes.reshape(-1), num_segments=problem.num_nodes)
+
+
 def calc_reduced_system(problem: ElasticProblem, vertices, poisson_ratio, modulus):
     """The fixed-node-reduced operator A = P K P + (I - P) as a function, its
-    block-Jacobi preconditioner and K itself (as a function of u)."""
-    values = calc_stiffness_blocks(problem, vertices, poisson_ratio, modulus)
-    mask = (~problem.is_fixed).astype(values.dtype)[:, None]
+    block-Jacobi preconditioner and K itself (as a function of u).
+
+    K u is applied element by element without assembling K (matrix-free): the strain
+    at each tet's four quadrature points, the deviatoric stress, its virtual work
+    against the shape gradients, plus the tet's volumetric term, summed into the
+    nodes. It reads the shape gradients (num_tets x 120 numbers) instead of K's
+    blocks (~9 x 125 numbers per node), several times less memory per product
+    (:func:`calc_stiffness_blocks` assembles K for checks and other solvers)."""
+    mu, kappa = calc_lame(modulus, poisson_ratio)
+    gradients, weights, mean_gradients = calc_element_operators(problem, vertices)
+    volumes = jnp.sum(weights, axis=1)
+    dtype = vertices.dtype
+    mask = (~problem.is_fixed).astype(dtype)[:, None]
+    eye = jnp.eye(3, dtype=dtype)
 
     def stiffness(u):
-        return apply_blocks(problem.pattern, values, u)
+        element_u = u[problem.tet_nodes]  # (T, 10, 3)
+        grad_u = jnp.einsum("tak,tqal->tqkl", element_u, gradients)
+        strain = 0.5 * (grad_u + jnp.swapaxes(grad_u, -1, -2))
+        trace = jnp.trace(strain, axis1=-2, axis2=-1)
+        stress = (2.0 * mu) * (strain - trace[..., None, None] * eye[None, None] / 3.0) * weights[:, :, None, None]
+        forces = jnp.einsum("tqkl,tqal->tak", stress, gradients)
+        divergence = jnp.einsum("tad,tad->t", mean_gradients, element_u)
+        forces = forces + (kappa * volumes * divergence)[:, None, None] * mean_gradients
+        return jax.ops.segment_sum(forces.reshape(-1, 3), problem.tet_nodes.reshape(-1), num_segments=problem.num_nodes)
 
     def operator_fn(u):
         return mask * stiffness(mask * u) + (1.0 - mask) * u
 
-    eye = jnp.eye(3, dtype=values.dtype)
-    diagonal = values[problem.pattern.diagonal]
+    diagonal = calc_diagonal_blocks(problem, vertices, poisson_ratio, modulus)
     diagonal = jnp.where(problem.is_fixed[:, None, None], eye[None], diagonal)
     inverse = jax.lax.stop_gradient(jnp.linalg.inv(diagonal))
     return operator_fn, inverse, stiffness
 
 
-def solve_reduced(operator_fn, inverse, rhs, rtol, max_steps, throw):
-    """Solve A x = rhs by block-Jacobi preconditioned CG (lineax; implicit adjoint).
-    **Returns:** (x, num_steps, relative residual, result)."""
+def _run_cg(problem, params, rhs, rtol, max_steps, throw, multigrid):
+    """Preconditioned CG on A(params) x = rhs (lineax), never differentiated: the
+    stopping rule's absolute part scales with this right-hand side's largest entry."""
+    vertices, poisson_ratio, modulus = jax.lax.stop_gradient(params)
+    rhs = jax.lax.stop_gradient(rhs)
+    operator_fn, inverse, _ = calc_reduced_system(problem, vertices, poisson_ratio, modulus)
     structure = jax.ShapeDtypeStruct(rhs.shape, rhs.dtype)
-    operator = lx.FunctionLinearOperator(operator_fn, structure, tags=lx.positive_semidefinite_tag)
-    preconditioner = lx.FunctionLinearOperator(
-        lambda r: jnp.einsum("nij,nj->ni", inverse, r), structure, tags=lx.positive_semidefinite_tag
-    )
-    atol = rtol * jax.lax.stop_gradient(jnp.max(jnp.abs(rhs)))
+    tags = (lx.symmetric_tag, lx.positive_semidefinite_tag)
+    operator = lx.FunctionLinearOperator(operator_fn, structure, tags=tags)
+    if multigrid is None:
+        precondition = lambda r: jnp.einsum("nij,nj->ni", inverse, r)
+    else:
+        multigrid = jax.lax.stop_gradient(multigrid)
+        precondition = lambda r: multigrid.apply(operator_fn, inverse, r)
+    preconditioner = lx.FunctionLinearOperator(precondition, structure, tags=tags)
+    # lineax's CG stops when |r_i| <= atol + rtol |b_i| for every i; most b_i are 0, so
+    # the absolute part scales with the largest entry of b.
+    atol = rtol * jnp.max(jnp.abs(rhs))
     solver = lx.CG(rtol=rtol, atol=atol, max_steps=max_steps)
     solution = lx.linear_solve(operator, rhs, solver, options={"preconditioner": preconditioner}, throw=throw)
     x = solution.value
-    residual = operator_fn(x) - rhs
     rhs_norm = jnp.linalg.norm(rhs)
-    relative = jax.lax.stop_gradient(jnp.linalg.norm(residual) / jnp.where(rhs_norm > 0, rhs_norm, 1.0))
-    return x, solution.stats["num_steps"], relative, solution.result
+    relative = jnp.linalg.norm(operator_fn(x) - rhs) / jnp.where(rhs_norm > 0, rhs_norm, 1.0)
+    return x, (solution.stats["num_steps"], relative, solution.result)
+
+
+@eqx.filter_custom_vjp
+def _linear_solve(params_and_rhs, problem, rtol, max_steps, throw, multigrid):
+    params, rhs = params_and_rhs
+    return _run_cg(problem, params, rhs, rtol, max_steps, throw, multigrid)
+
+
+@_linear_solve.def_fwd
+def _linear_solve_fwd(perturbed, params_and_rhs, problem, rtol, max_steps, throw, multigrid):
+    out = _linear_solve(params_and_rhs, problem, rtol, max_steps, throw, multigrid)
+    return out, out[0]
+
+
+@_linear_solve.def_bwd
+def _linear_solve_bwd(x, grad_obj, perturbed, params_and_rhs, problem, rtol, max_steps, throw, multigrid):
+    params, _ = params_and_rhs
+    x_bar = grad_obj[0]
+    if x_bar is None:
+        return None
+    # A is symmetric: the adjoint solve is a solve with A, its stopping rule scaled to
+    # the cotangent (not to the forward right-hand side). Then
+    # d(params) = -lambda . dA/d(params) x and d(rhs) = lambda.
+    lam, _ = _run_cg(problem, params, x_bar, rtol, max_steps, throw, multigrid)
+    _, pullback = jax.vjp(lambda p: calc_reduced_system(problem, *p)[0](x), params)
+    (params_bar,) = pullback(-lam)
+    return params_bar, lam
+
+
+def solve_reduced(problem, params, rhs, rtol, max_steps, throw, multigrid=None):
+    """Solve A(params) x = rhs, params = (vertices, nu, E), by preconditioned CG
+    (lineax): block Jacobi, or a multigrid V-cycle (:class:`MultigridPreconditioner`)
+    when given. Differentiable in reverse mode by the implicit adjoint (one more solve
+    with A, whose stopping rule is scaled to the cotangent: lineax's own adjoint reuses
+    the forward solve's absolute tolerance, which a cotangent of another scale never
+    reaches); forward mode is not defined.
+
+    **Returns:** (x, num_steps, relative residual ||A x - b|| / ||b||, result)."""
+    x, (num_steps, relative, result) = _linear_solve((params, rhs), problem, rtol, max_steps, throw, multigrid)
+    return x, num_steps, jax.lax.stop_gradient(relative), result
 
 
 @eqx.filter_jit
-def _solve(problem, vertices, poisson_ratio, modulus, loads, dirichlet_values, rtol, max_steps, throw):
-    operator_fn, inverse, stiffness = calc_reduced_system(problem, vertices, poisson_ratio, modulus)
+def _solve(problem, vertices, poisson_ratio, modulus, loads, dirichlet_values, rtol, max_steps, throw, multigrid):
+    _, _, stiffness = calc_reduced_system(problem, vertices, poisson_ratio, modulus)
     mask = (~problem.is_fixed).astype(loads.dtype)[:, None]
     fixed = (1.0 - mask) * dirichlet_values
     rhs = mask * (loads - stiffness(fixed))
-    x, num_steps, relative, result = solve_reduced(operator_fn, inverse, rhs, rtol, max_steps, throw)
+    x, num_steps, relative, result = solve_reduced(problem, (vertices, poisson_ratio, modulus), rhs, rtol, max_steps, throw, multigrid)
     displacements = mask * x + fixed
     _, kappa = calc_lame(modulus, poisson_ratio)
     _, _, mean_gradients = calc_element_operators(problem, vertices)
@@ -255,6 +333,7 @@ def solve_elasticity(
     rtol: float | None = None,
     max_steps: int | None = None,
     throw: bool = True,
+    multigrid=None,
 ) -> ElasticSolution:
     """Solve for the elastomer's displacement and pressure (jittable, vmappable over
     loads, differentiable in the loads, vertices, E and nu by the implicit adjoint).
@@ -271,6 +350,9 @@ def solve_elasticity(
     - `vertices`: positions to solve on; default the problem's.
     - `dirichlet_values`: (num_nodes, 3) displacements of the fixed nodes, m (default 0).
     - `rtol`, `max_steps`, `throw`: as :func:`hydrotact.field.solve_strain`'s.
+    - `multigrid`: a :class:`MultigridPreconditioner` of the problem (from
+      :func:`make_multigrid_preconditioner`): far fewer CG steps on large meshes;
+      default block Jacobi.
 
     **Returns:** an :class:`ElasticSolution`.
     """
@@ -284,7 +366,7 @@ def solve_elasticity(
     dirichlet_values = jnp.zeros((num_nodes, 3), dtype) if dirichlet_values is None else jnp.asarray(dirichlet_values, dtype)
     rtol = _default_rtol(dtype) if rtol is None else rtol
     max_steps = 20 * num_nodes + 1000 if max_steps is None else max_steps
-    return _solve(problem, vertices, nu, jnp.asarray(modulus, dtype), loads, dirichlet_values, rtol, max_steps, throw)
+    return _solve(problem, vertices, nu, jnp.asarray(modulus, dtype), loads, dirichlet_values, rtol, max_steps, throw, multigrid)
 
 
 def calc_stress(problem: ElasticProblem, solution: ElasticSolution, modulus=1.0, poisson_ratio=None, vertices=None):
