@@ -38,7 +38,7 @@ from .._errors import HydrotactError
 from .._math import safe_norm
 from .._types import Array, Bool, Float, Int
 from ..field import calc_tet_gradients
-from ._loads import TRIANGLE_QUADRATURE, TRIANGLE_WEIGHTS, calc_barycentric
+from ._loads import TRIANGLE_QUADRATURE, TRIANGLE_WEIGHTS
 from ._problem import (
     TET_QUADRATURE,
     ElasticProblem,
@@ -230,9 +230,13 @@ def calc_polygon_node_integrals(vertices, tets, surface):
     point_pressures = q[None, None, :, 0] * pa[..., None] + q[None, None, :, 1] * pb[..., None] + q[None, None, :, 2] * pc[..., None]
     tet_index = jnp.maximum(surface.tet_index, 0)
     num_points = points.shape[1] * points.shape[2]
-    flat_tets = jnp.repeat(tet_index, num_points)
-    lam = calc_barycentric(vertices, tets, flat_tets, points.reshape(-1, 3))
-    shape = calc_shape_functions(lam).reshape(polygon.shape[0], num_points, 10)
+    # Each polygon's tet once: lambda = e_0 + grad(lambda) . (x - x_0) at its points.
+    lambda_gradients, _ = calc_tet_gradients(vertices, tets[tet_index])  # (C, 4, 3)
+    origin = vertices[tets[tet_index, 0]]
+    offsets = points.reshape(polygon.shape[0], num_points, 3) - origin[:, None, :]
+    lam = jnp.einsum("cid,cqd->cqi", lambda_gradients, offsets)
+    lam = lam + jnp.asarray([1.0, 0.0, 0.0, 0.0], lam.dtype)[None, None, :]
+    shape = calc_shape_functions(lam)  # (C, Q, 10)
     return jnp.einsum("cq,cqa->ca", (weights * point_pressures).reshape(polygon.shape[0], num_points), shape)
 
 
