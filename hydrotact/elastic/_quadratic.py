@@ -20,6 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._types import Array, Bool, Int
+from ..field import make_stiffness_pattern
 
 # The edges of a tet, in scikit-fem's ElementTetP2 order of its midside nodes.
 TET_EDGES = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]])
@@ -113,29 +114,11 @@ class BlockPattern(eqx.Module):
 
 
 def make_block_pattern(tet_nodes, num_nodes: int) -> BlockPattern:
-    """Build the block sparsity pattern of a vector P2 matrix on `tet_nodes` (host)."""
-    tet_nodes = np.asarray(tet_nodes, dtype=np.int64)
-    width = tet_nodes.shape[1]
-    rows = np.repeat(tet_nodes, width, axis=1).reshape(-1)
-    cols = np.tile(tet_nodes, (1, width)).reshape(-1)
-    unique_keys, inverse = np.unique(rows * num_nodes + cols, return_inverse=True)
-    unique_rows, unique_cols = unique_keys // num_nodes, unique_keys % num_nodes
-    row_starts = np.searchsorted(unique_rows, np.arange(num_nodes))
-    position = np.arange(len(unique_keys)) - row_starts[unique_rows]
-    row_width = int(position.max()) + 1
-    ell_cols = np.broadcast_to(np.arange(num_nodes)[:, None], (num_nodes, row_width)).copy()
-    ell_cols[unique_rows, position] = unique_cols
-    is_entry = np.zeros((num_nodes, row_width), dtype=bool)
-    is_entry[unique_rows, position] = True
-    flat_slot = unique_rows * row_width + position
-    diagonal_key = np.searchsorted(unique_keys, np.arange(num_nodes) * (num_nodes + 1))
-    index_dtype = np.int32 if num_nodes * row_width < 2**31 - 1 else np.int64
-    return BlockPattern(
-        cols=ell_cols.astype(index_dtype),
-        is_entry=is_entry,
-        scatter=flat_slot[inverse.reshape(-1)].astype(index_dtype),
-        diagonal=flat_slot[diagonal_key].astype(index_dtype),
-    )
+    """Build the block sparsity pattern of a vector P2 matrix on `tet_nodes` (host):
+    the scalar pattern of the node couplings (:func:`hydrotact.field.make_stiffness_pattern`),
+    each slot holding a 3 x 3 block."""
+    scalar = make_stiffness_pattern(tet_nodes, num_nodes)
+    return BlockPattern(cols=scalar.cols, is_entry=scalar.is_entry, scatter=scalar.scatter, diagonal=scalar.diagonal)
 
 
 def apply_blocks(pattern: BlockPattern, values, u):

@@ -32,7 +32,8 @@ class StiffnessPattern(eqx.Module):
 
     - `cols`: (num_vertices, max_row_entries) column of each slot.
     - `is_entry`: (num_vertices, max_row_entries) False on padding slots.
-    - `scatter`: (num_tets * 16,) for each element-matrix entry, its flat slot.
+    - `scatter`: (num_tets * 16,) for each element-matrix entry, its flat slot (row
+      node a, column node b, in the order of `tets[:, a], tets[:, b]`).
     - `diagonal`: (num_vertices,) the flat slot of each diagonal entry.
     """
 
@@ -57,10 +58,13 @@ class StiffnessPattern(eqx.Module):
 
 
 def make_stiffness_pattern(tets, num_vertices: int) -> StiffnessPattern:
-    """Build the sparsity pattern of the P1 stiffness matrix of `tets` (host)."""
+    """Build the sparsity pattern of the P1 stiffness matrix of `tets` (host). Any
+    element width works: (num_elements, k) node indices couple every pair of their
+    nodes (the P2 elasticity's 10-node tets use it for their 3 x 3 blocks)."""
     tets = np.asarray(tets, dtype=np.int64)
-    rows = np.repeat(tets, 4, axis=1).reshape(-1)
-    cols = np.tile(tets, (1, 4)).reshape(-1)
+    width = tets.shape[1]
+    rows = np.repeat(tets, width, axis=1).reshape(-1)
+    cols = np.tile(tets, (1, width)).reshape(-1)
     unique_keys, inverse = np.unique(rows * num_vertices + cols, return_inverse=True)
     unique_rows, unique_cols = unique_keys // num_vertices, unique_keys % num_vertices
     row_starts = np.searchsorted(unique_rows, np.arange(num_vertices))
