@@ -438,3 +438,15 @@ def test_multigrid_preconditioner_gives_the_same_solution_and_gradients_in_fewer
     np.testing.assert_allclose(float(value), float(plain), rtol=1e-9)
     np.testing.assert_allclose(np.asarray(grads), np.asarray(plain_grads), rtol=1e-7)
     np.testing.assert_allclose(float(grads[1]), float(value), rtol=1e-9)  # linear in the load
+
+
+def test_design_refuses_elastic_barometers_with_one_line():
+    """The layout search moves ray-cast taxels only: a sensor with elastic barometers
+    is refused before any work, naming them."""
+    from hydrotact import HydrotactError
+    from hydrotact.design import design_layout
+    from hydrotact.sensors import load_sensor
+
+    kinds = ["elastic" if k in (3, 7) else "disk" for k in range(25)]
+    with pytest.raises(HydrotactError, match="barometers b03, b12 are elastic"):
+        design_layout(load_sensor(_pad_document(kinds)))

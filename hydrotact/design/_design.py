@@ -218,6 +218,14 @@ def design_layout(
     config = config or DesignConfig()
     regime = regime or DatasetConfig()
     spec = sensor if isinstance(sensor, SensorSpec) else load_sensor(sensor)
+    if spec.is_elastic.any():
+        # The layout's gradient reaches the ray-cast taxels only: an elastic barometer's
+        # receptive field is solved for its port on the host, so the search would not move it.
+        names = ", ".join(name for name, elastic in zip(spec.taxel_names, spec.is_elastic, strict=True) if elastic)
+        raise HydrotactError(
+            f"{spec.source}: design moves ray-cast taxels (disk, cone) only, and barometers {names} are elastic; "
+            "design the layout with disk or cone fields, then make them elastic"
+        )
     count = spec.num_taxels if num_barometers is None else num_barometers
     if not isinstance(count, int | np.integer) or isinstance(count, bool) or count < 1:
         raise HydrotactError(f"--barometers: must be a whole number of at least 1, got {count!r}")
