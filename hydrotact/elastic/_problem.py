@@ -37,6 +37,7 @@ import numpy as np
 from .._errors import HydrotactError, where
 from .._types import Array, Bool, Float, Int
 from ..field import calc_tet_gradients
+from ..field._solve import _default_rtol
 from ..mesh import CORE, TetMesh
 from ._quadratic import (
     BlockPattern,
@@ -186,10 +187,6 @@ class ElasticSolution(eqx.Module):
     num_steps: Int[Array, ""]
     relative_residual: Float[Array, ""]
     result: lx.RESULTS
-
-
-def _default_rtol(dtype) -> float:
-    return 1e-10 if jnp.dtype(dtype) == jnp.float64 else 1e-5
 
 
 def calc_diagonal_blocks(problem: ElasticProblem, vertices, poisson_ratio, modulus=1.0):
