@@ -165,7 +165,8 @@ def test_config_refuses_impossible_regimes():
     for kwargs, words in (
         ({"events": 0}, "--events"), ({"force_range": (5.0, 1.0)}, "--force-range"), ({"force_range": (0.0, 8.0)}, "LOW > 0"),
         ({"gain_spread": 0.5}, "--gain-spread"), ({"max_tilt_deg": 95.0}, "--max-tilt-deg"), ({"force_distribution": "normal"}, "--force-distribution"),
-        ({"speed_range": (0.5, 0.6), "max_depth": 1e-3}, "--speed-range"),
+        ({"speed_range": (0.5, 0.6), "max_depth": 1e-3}, "--speed-range"), ({"target": "torque"}, "--target"),
+        ({"depth_range": (2e-3, 1e-3)}, "--depth-range"), ({"target": "depth", "depth_range": (0.0, 0.0)}, "HIGH > 0"),
     ):
         with pytest.raises(HydrotactError, match=words):
             DatasetConfig(**kwargs)
@@ -294,6 +295,40 @@ def test_presses_at_the_board_stop_at_their_target_along_the_approach():
     whole = modulus * np.linalg.norm(presses.table["force_S"][presses.hold], axis=1)
     assert np.all(whole < 1.2 * plan.target_forces), (whole, plan.target_forces)
     assert np.all(presses.hold_depths < 3e-3), presses.hold_depths
+
+
+def test_the_papers_depth_regime_holds_at_the_drawn_depths():
+    """With target depths (the barometric estimation paper's regime) the plan draws
+    depths uniformly in their range and no forces, every press marches to the first
+    sample at or past its depth and holds at the depth itself, the forces follow (rising
+    with depth), and a depth past the event's limit holds at the limit, not reached;
+    the force-target plan's draws are unchanged by the option."""
+    from hydrotact.contact import parse_probe
+    from hydrotact.sim import make_sensor_model
+
+    spec = load_sensor("sphere8")
+    skin = find_touchable_skin(spec, spec.make_mesh(check=False))
+    wide = sample_events(skin, DatasetConfig(events=4000, target="depth", depth_range=(0.5e-3, 2.5e-3)), np.random.default_rng(1))
+    assert np.all(np.isnan(wide.target_forces))
+    assert stats.kstest((wide.target_depths - 0.5e-3) / 2e-3, "uniform").pvalue > 1e-3
+    by_force = sample_events(skin, DatasetConfig(events=50), np.random.default_rng(2))
+    again = sample_events(skin, DatasetConfig(events=50, depth_range=(1e-3, 2e-3)), np.random.default_rng(2))
+    np.testing.assert_array_equal(by_force.target_forces, again.target_forces)
+    assert np.all(np.isnan(by_force.target_depths))
+
+    config = DatasetConfig(events=3, probe=COARSE_SPHERE, num_rays=16, target="depth", depth_range=(0.3e-3, 1.2e-3), speed_range=(0.02, 0.02), max_depth=1.0e-3)
+    plan = sample_events(skin, config, np.random.default_rng(0))
+    plan = dataclasses.replace(plan, target_depths=np.array([0.35e-3, 0.8e-3, 1.15e-3]))  # the last past max_depth
+    presses = march_presses(PoseEngine(make_sensor_model(spec, num_rays=16), parse_probe(config.probe)), plan, config, 5e6)
+    np.testing.assert_array_equal(presses.reached, [True, True, False])
+    np.testing.assert_allclose(presses.hold_depths[:2], plan.target_depths[:2], rtol=0, atol=1e-15)
+    step = 0.02 / config.rate_hz
+    assert presses.hold_depths[2] <= config.max_depth and presses.hold_depths[2] > config.max_depth - step
+    for event in range(3):
+        depths = presses.depths[event]
+        assert depths[-1] < presses.hold_depths[event] + 1e-15 and depths[-1] > presses.hold_depths[event] - step - 1e-15
+        along = presses.table["force_S"][presses.approach[event]] @ plan.directions[event] * 5e6
+        assert np.all(np.diff(along) >= 0.0) and 0.0 < along[-1] <= presses.hold_forces[event]  # the forces follow the depth
 
 
 def test_slices_start_on_the_rung_their_predicted_needs_fit():

@@ -383,6 +383,32 @@ def test_readings_gradients_match_central_differences(pad):
     np.testing.assert_allclose(float(grads[3][0]), fd_axis, rtol=1e-5)
 
 
+def test_field_derivatives_match_central_differences_of_the_fields(pad):
+    """The fields' derivatives along a port's position and axis (one solve each, what
+    a layout design linearises with) against central differences of the solved fields,
+    seen through a fixed random weighting of every node; a pressure port's axis
+    changes nothing."""
+    mesh, _, _, ports, _ = pad
+    problem = elastic.make_elastic_problem(mesh, 0.49)
+    derivatives = elastic.calc_field_derivatives(problem, ports, rtol=1e-12)
+    assert derivatives.positions.shape == (problem.num_nodes, 4, 3, 3) and float(derivatives.relative_residual) < 1e-10
+    weights = jnp.asarray(np.random.default_rng(3).normal(size=(problem.num_nodes, 3)))
+    e = np.eye(3)
+
+    def seen(position, axis, channel):
+        fields = elastic.calc_receptive_fields(problem, eqx_tree_at_ports(ports, position, axis, channel), rtol=1e-12)
+        return float(jnp.sum(weights * fields.responses[:, channel]))
+
+    for channel in (0, 1):
+        position, axis = jnp.asarray(ports.positions_S[channel]), jnp.asarray(ports.axes_S[channel])
+        for k in (0, 2):
+            fd = _central(lambda p, a=axis, c=channel: seen(p, a, c), position, 2e-7 * e[k])
+            np.testing.assert_allclose(float(jnp.sum(weights * derivatives.positions[:, channel, :, k])), fd, rtol=1e-5)
+        fd_axis = _central(lambda a, p=position, c=channel: seen(p, a, c), axis, 1e-6 * e[0])
+        np.testing.assert_allclose(float(jnp.sum(weights * derivatives.axes[:, channel, :, 0])), fd_axis, rtol=1e-5, atol=1e-9 * abs(fd_axis) + 1e-12)
+    assert float(jnp.max(jnp.abs(derivatives.axes[:, 0]))) == 0.0 and float(jnp.max(jnp.abs(derivatives.axes[:, 1]))) > 0.0
+
+
 def eqx_tree_at_ports(ports, position, axis, channel):
     import equinox as eqx
 
@@ -465,6 +491,48 @@ def test_elastic_barometers_in_the_forward_model(tmp_path):
     # the elastic channels of the mixed sensor are those of the all-elastic one
     all_samples = simulate(second, make_prony(1e5), probe, trajectory, cache=False)
     np.testing.assert_allclose(np.asarray(all_samples.taxel_pressures)[:, spec.is_elastic], pressures[:, spec.is_elastic], rtol=1e-6)
+
+
+def _elastic_builtin(name):
+    """A built-in curved sensor with every barometer elastic (0.5 mm ports, the pressure)."""
+    from hydrotact.sensors import load_sensor
+    from hydrotact.sensors._builtins import builtin_documents
+
+    document = builtin_documents()[name]
+    for taxel in document["taxels"]:
+        taxel["receptive_field"] = {"kind": "elastic"}
+    return load_sensor(document)
+
+
+@pytest.mark.parametrize("name", ["sphere8", "ellipsoid8"])
+def test_the_curved_sensors_have_no_blind_patch_under_the_elastic_model(name, monkeypatch, tmp_path):
+    """sphere8 and ellipsoid8 with their built-in layouts made elastic: every touchable
+    skin point (uniform by area), pressed along its inward normal by the dataset
+    generator's 3 mm sphere and read at 0.5 N, moves at least two channels by more
+    than 3 noise stds of the part, and every channel moves somewhere (the cones left
+    17.6 % of sphere8's skin to none and b5, b7 to nothing). The fields are the
+    shipped ones: nothing is solved."""
+    from hydrotact.contact import parse_probe
+    from hydrotact.datasets import PoseEngine, find_touchable_skin, pressing_rotation_vectors, sample_skin_points
+    from hydrotact.elastic import _cache
+    from hydrotact.sim import make_sensor_model
+
+    monkeypatch.setattr(_cache, "_solve_fields", lambda *args: pytest.fail("the shipped fields were not found"))
+    monkeypatch.setenv("HYDROTACT_CACHE_DIR", str(tmp_path))  # no field solved before can be read
+    spec = _elastic_builtin(name)
+    model = make_sensor_model(spec, num_rays=1)
+    assert not model.uses_rays and model.elastic.num_barometers == 8
+    skin = find_touchable_skin(spec, spec.make_mesh(check=False))
+    points, normals, _ = sample_skin_points(skin, 48, np.random.default_rng(7))
+    depth = 0.3e-3
+    rows = np.column_stack([points - depth * normals, pressing_rotation_vectors(-normals)])
+    unit = PoseEngine(model, parse_probe("sphere:r=3mm,subdivisions=2")).compute(rows)
+    force = np.einsum("ij,ij->i", unit["force_S"], -normals)  # per pascal of E, along the press
+    assert np.all(force > 0.0)
+    readings = unit["taxel_pressures"] * (0.5 / force)[:, None]  # Pa at 0.5 N: the response is linear in E
+    moving = np.abs(readings) > 3.0 * spec.part.noise_rms_pa
+    assert moving.sum(axis=1).min() >= 2, np.flatnonzero(moving.sum(axis=1) < 2)
+    assert moving.any(axis=0).all(), np.flatnonzero(~moving.any(axis=0))
 
 
 def test_matrix_free_stiffness_equals_the_assembled_blocks():

@@ -17,6 +17,17 @@ def number(text: str) -> float:
         raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
 
 
+def number_pair(text: str) -> tuple[float, float]:
+    """An argparse type: LOW,HIGH, two floats, or a one-line usage error."""
+    parts = text.split(",")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        return float(parts[0]), float(parts[1])
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected LOW,HIGH (two numbers), got {text!r}") from None
+
+
 def add_source_arguments(parser: argparse.ArgumentParser, what: str) -> None:
     """The sensor-or-file argument and its meshing flags (mesh, field)."""
     parser.add_argument("source", metavar=what, help="a built-in sensor (pad5x5, sphere8, ellipsoid8) or a file")

@@ -7,7 +7,7 @@ same command started again picks up after the last one (the folder goes on succe
 
 from pathlib import Path
 
-from ._arguments import number
+from ._arguments import number, number_pair
 from ._output import print_report
 
 PER_CONTACT = ("localisation_bounds", "neighbour_errors")
@@ -44,6 +44,8 @@ def add_parser(subparsers):
     parser.add_argument("--material", type=Path, metavar="MATERIAL.json", help="the elastomer (its E(0) is used); default: elastic, --modulus")
     parser.add_argument("--modulus", type=number, metavar="E", help="elastic modulus in Pa, without --material (default 1e7, the dataset generator's)")
     parser.add_argument("--probe", metavar="SPEC", help="the indenter (default: the dataset regime's, sphere:r=3mm)")
+    parser.add_argument("--target", choices=["force", "depth"], default="force", help="the contacts pressed to the dataset regime's forces (default) or to its depths (the paper's regime)")
+    parser.add_argument("--depth-range", type=number_pair, metavar="LOW,HIGH", help="target depths with --target depth, m (default: the dataset regime's, 0.0001,0.003)")
     parser.add_argument("--contacts", type=int, default=default("contacts"), metavar="N", help=f"contacts designed for, and as many held out (default {default('contacts')})")
     parser.add_argument("--batch", type=int, default=default("batch"), metavar="N", help=f"contacts per optimiser step, a fresh draw from the pool each step (default {default('batch')})")
     parser.add_argument("--rays", type=int, default=default("num_rays"), metavar="N", help=f"rays per receptive field (default {default('num_rays')})")
@@ -79,7 +81,10 @@ def run(args) -> None:
         placement=args.placement, margin=args.margin, spacing=args.spacing, max_tilt_deg=args.max_tilt, max_height=args.max_height, field_sizes=args.field_sizes,
         restarts=args.restarts, steps=args.steps, seed=args.seed,
     )
-    regime = DatasetConfig() if args.probe is None else DatasetConfig(probe=args.probe)
+    regime = {"target": args.target} | ({} if args.probe is None else {"probe": args.probe})
+    if args.depth_range is not None:
+        regime["depth_range"] = args.depth_range
+    regime = DatasetConfig(**regime)
     partial = output.with_name(output.name + ".partial")
     design = design_layout(
         args.sensor, args.barometers, config=config, regime=regime, material=args.material, modulus=args.modulus, checkpoint=partial, progress=not args.json

@@ -7,24 +7,12 @@ the command picks up the unit responses already computed."""
 from pathlib import Path
 
 from .._defaults import DEFAULT_DATASET_MODULUS
-from ._arguments import number
+from ._arguments import number, number_pair
 from ._output import print_report
 
 
-def _pair(text: str) -> tuple[float, float]:
-    import argparse
-
-    parts = text.split(",")
-    try:
-        if len(parts) != 2:
-            raise ValueError
-        return float(parts[0]), float(parts[1])
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected LOW,HIGH (two numbers), got {text!r}") from None
-
-
 def add_parser(subparsers):
-    from ..datasets import FORCE_DISTRIBUTIONS, DatasetConfig
+    from ..datasets import FORCE_DISTRIBUTIONS, TARGETS, DatasetConfig
 
     d = DatasetConfig.__dataclass_fields__
     default = lambda name: d[name].default
@@ -46,12 +34,17 @@ def add_parser(subparsers):
     parser.add_argument("--seed", type=int, default=default("seed"), metavar="K", help=f"seed of every draw (default {default('seed')})")
     parser.add_argument(
         "--probe", default=default("probe"), metavar="SPEC", help=f"the indenter: sphere:r=3mm, cylinder:d=2mm, box:x=4mm,y=4mm,z=2mm (default {default('probe')})")
+    parser.add_argument(
+        "--target", default=default("target"), choices=list(TARGETS),
+        help="what each hold is drawn as: force (default: the forces are the estimator's range whatever the material) or depth (the paper's: forces follow, low ones over-sampled)")
+    parser.add_argument(
+        "--depth-range", type=number_pair, default=default("depth_range"), metavar="LOW,HIGH", help=f"target depth past the skin point with --target depth, m (default {pair('depth_range')})")
     parser.add_argument("--force-distribution", default=default("force_distribution"), choices=list(FORCE_DISTRIBUTIONS), help="target force law (default loguniform: low forces over-sampled)")
-    parser.add_argument("--force-range", type=_pair, default=default("force_range"), metavar="LOW,HIGH", help=f"target force along the approach, N (default {pair('force_range')})")
+    parser.add_argument("--force-range", type=number_pair, default=default("force_range"), metavar="LOW,HIGH", help=f"target force along the approach, N (default {pair('force_range')})")
     parser.add_argument("--max-tilt", type=number, default=default("max_tilt_deg"), metavar="DEG", help=f"largest angle between the approach and the skin normal (default {default('max_tilt_deg'):g})")
-    parser.add_argument("--speed-range", type=_pair, default=default("speed_range"), metavar="LOW,HIGH", help=f"approach and retract speed, m/s (default {pair('speed_range')})")
-    parser.add_argument("--hold-range", type=_pair, default=default("hold_range"), metavar="LOW,HIGH", help=f"hold duration, s (default {pair('hold_range')})")
-    parser.add_argument("--gap-range", type=_pair, default=default("gap_range"), metavar="LOW,HIGH", help=f"no-contact time before each event, s (default {pair('gap_range')})")
+    parser.add_argument("--speed-range", type=number_pair, default=default("speed_range"), metavar="LOW,HIGH", help=f"approach and retract speed, m/s (default {pair('speed_range')})")
+    parser.add_argument("--hold-range", type=number_pair, default=default("hold_range"), metavar="LOW,HIGH", help=f"hold duration, s (default {pair('hold_range')})")
+    parser.add_argument("--gap-range", type=number_pair, default=default("gap_range"), metavar="LOW,HIGH", help=f"no-contact time before each event, s (default {pair('gap_range')})")
     parser.add_argument("--max-depth", type=number, default=default("max_depth"), metavar="M", help=f"deepest approach past the skin point, m (default {default('max_depth'):g})")
     parser.add_argument(
         "--max-depth-fraction", type=number, default=default("max_depth_fraction"), metavar="F",
@@ -79,7 +72,7 @@ def run(args) -> None:
     if args.material is not None and args.modulus is not None:
         raise HydrotactError("--modulus: give either --material or --modulus, not both")
     config = DatasetConfig(
-        events=args.events, seed=args.seed, probe=args.probe, force_distribution=args.force_distribution, force_range=args.force_range,
+        events=args.events, seed=args.seed, probe=args.probe, target=args.target, depth_range=args.depth_range, force_distribution=args.force_distribution, force_range=args.force_range,
         max_tilt_deg=args.max_tilt, speed_range=args.speed_range, hold_range=args.hold_range, gap_range=args.gap_range,
         max_depth=args.max_depth, max_depth_fraction=args.max_depth_fraction,
         rate_hz=args.rate, num_rays=args.rays, noise_rms=args.noise, gain_spread=args.gain_spread, offset_spread=args.offset_spread,

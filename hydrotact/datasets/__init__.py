@@ -11,7 +11,7 @@ responses on local devices or Ray tasks).
 """
 
 from ._compute import PoseEngine as PoseEngine, compute_block as compute_block
-from ._config import FORCE_DISTRIBUTIONS as FORCE_DISTRIBUTIONS, PHASES as PHASES, DatasetConfig as DatasetConfig
+from ._config import FORCE_DISTRIBUTIONS as FORCE_DISTRIBUTIONS, PHASES as PHASES, TARGETS as TARGETS, DatasetConfig as DatasetConfig
 from ._events import (
     EventPlan as EventPlan,
     Skin as Skin,

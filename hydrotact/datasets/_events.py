@@ -114,7 +114,8 @@ class EventPlan:
     """The drawn events (arrays of length N, frame S, SI units): `points` on the skin
     and its outward `normals`; the approach `directions` (into the skin) and the
     probe's `rotation_vectors`; `tilts` (rad) from the inward normal; `target_forces`
-    (N); `speeds` (m/s); `holds` and `gaps` (s); `thickness` (m) of elastomer along
+    (N) or, where the config's target is depth, `target_depths` (m past the skin
+    point; the other is NaN); `speeds` (m/s); `holds` and `gaps` (s); `thickness` (m) of elastomer along
     the approach and `max_depths` (m), the deepest the approach goes: the smaller of
     `max_depth` and `max_depth_fraction` of the thickness."""
 
@@ -124,6 +125,7 @@ class EventPlan:
     rotation_vectors: np.ndarray
     tilts: np.ndarray
     target_forces: np.ndarray
+    target_depths: np.ndarray
     speeds: np.ndarray
     holds: np.ndarray
     gaps: np.ndarray
@@ -149,13 +151,20 @@ def sample_events(skin: Skin, config: DatasetConfig, rng: np.random.Generator) -
     points, normals, _ = sample_skin_points(skin, count, rng)
     directions, tilts = _tilt(-normals, np.radians(config.max_tilt_deg), rng)
     thickness = calc_approach_thickness(skin, points, directions)
+    # One draw in the force's place, so a force-target plan's draws are as before.
+    nothing = np.full(count, np.nan)
+    if config.target == "depth":
+        forces, depths = nothing, rng.uniform(*config.depth_range, count)
+    else:
+        forces, depths = draw_target_forces(config, count, rng), nothing
     return EventPlan(
         points=points,
         normals=normals,
         directions=directions,
         rotation_vectors=pressing_rotation_vectors(directions),
         tilts=tilts,
-        target_forces=draw_target_forces(config, count, rng),
+        target_forces=forces,
+        target_depths=depths,
         speeds=rng.uniform(*config.speed_range, count),
         holds=rng.uniform(*config.hold_range, count),
         gaps=rng.uniform(*config.gap_range, count),

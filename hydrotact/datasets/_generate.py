@@ -296,7 +296,12 @@ def _warn(output, manifest: dict, config: DatasetConfig) -> None:
 
     stats = manifest["statistics"]
     short = stats["events_short_of_target"]
-    if short:
+    if short and config.target == "depth":
+        warnings.warn(HydrotactWarning(
+            f"{output}: {short} of {manifest['num_events']} events' target depths lay past --max-depth {config.max_depth * 1e3:g} mm "
+            f"or --max-depth-fraction {config.max_depth_fraction:g} of the elastomer's thickness; they hold there"
+        ), stacklevel=3)
+    elif short:
         warnings.warn(HydrotactWarning(
             f"{output}: {short} of {manifest['num_events']} events did not reach their target force within --max-depth {config.max_depth * 1e3:g} mm "
             f"or --max-depth-fraction {config.max_depth_fraction:g} of the elastomer's thickness "

@@ -8,7 +8,8 @@ round), each event taking as many samples as its force so far predicts it still 
 (at most `ROUND_SAMPLES`): after each round an event whose elastic force along its
 approach E(0) F(s)·d has reached its target stops, and its hold depth is interpolated
 linearly between its last two samples (the approach samples find the depth; there is no
-separate search). The holds (one pose each) are computed last. The retract retraces
+separate search). An event with a target depth (the paper's regime) marches to the
+first sample at or past it and holds at the depth itself. The holds (one pose each) are computed last. The retract retraces
 the approach's poses in reverse.
 
 Then the session's timeline is laid out (gap, approach, hold, retract per event) and
@@ -175,9 +176,16 @@ def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float
     done = np.zeros(count, dtype=bool)
     first_above = np.full(count, -1)  # the first sample at or above the target
     taken = np.zeros(count, dtype=np.int64)  # approach samples computed per event
+    by_depth = config.target == "depth"
+    if by_depth:  # the first sample at or past the target depth: every event's samples are known from the start
+        at_target = np.ceil((plan.target_depths + config.clearance) / steps - 1e-9).astype(np.int64)
+        depth_stops = np.minimum(at_target + 1, limits)
     while not done.all():
         active = np.flatnonzero(~done)
-        wanted = np.array([_samples_to_go(forces[e], plan.target_forces[e]) for e in active.tolist()], dtype=np.int64)
+        if by_depth:
+            wanted = np.minimum(depth_stops[active] - taken[active], ROUND_SAMPLES)
+        else:
+            wanted = np.array([_samples_to_go(forces[e], plan.target_forces[e]) for e in active.tolist()], dtype=np.int64)
         starts = taken[active]
         stops = np.minimum(starts + wanted, limits[active])
         lengths = stops - starts
@@ -201,6 +209,11 @@ def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float
             forces[event] += new.tolist()
             needs[event] += list(needed[offset : offset + length])
             offset += length
+            if by_depth:
+                if taken[event] + length >= depth_stops[event]:
+                    first_above[event] = at_target[event] if at_target[event] < limits[event] else -1
+                    done[event] = True
+                continue
             above = np.flatnonzero(new >= plan.target_forces[event])
             if above.size:
                 first_above[event] = taken[event] + int(above[0])
@@ -210,7 +223,7 @@ def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float
         taken[active] = stops
         if on_round is not None:
             still = np.flatnonzero(~done)
-            to_go = sum(min(_samples_to_go(forces[e], plan.target_forces[e]), int(limits[e] - taken[e])) for e in still.tolist())
+            to_go = int((depth_stops[still] - taken[still]).sum()) if by_depth else sum(min(_samples_to_go(forces[e], plan.target_forces[e]), int(limits[e] - taken[e])) for e in still.tolist())
             on_round(len(still), to_go + count + 1)
     reached = first_above >= 0
     hold_depths = np.empty(count)
@@ -220,7 +233,9 @@ def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float
         step = steps[event]
         if reached[event]:
             j = int(first_above[event])
-            if j == 0:
+            if by_depth:
+                hold_depths[event] = plan.target_depths[event]
+            elif j == 0:
                 hold_depths[event] = -config.clearance
             else:
                 low, high = forces[event][j - 1], forces[event][j]

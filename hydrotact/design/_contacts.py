@@ -112,10 +112,11 @@ def _linear_kernel(model, probe, capacity, depths, points, directions, rotations
     return jax.lax.map(lambda args: _linearise(model, probe, capacity, *args), (depths, points, directions, rotations), batch_size=8)
 
 
-def linearise_contacts(model, probe, modulus: float, points_S, normals_S, target_forces, deepest, rotation_vectors) -> DesignContacts:
+def linearise_contacts(model, probe, modulus: float, points_S, normals_S, target_forces, deepest, rotation_vectors, target_depths=None) -> DesignContacts:
     """Press `probe` into `model` at each skin point along its inward normal to the
-    depth of its target force (N) at `modulus` (Pa), no deeper than `deepest` (m), and
-    linearise each contact (host: grows the contact buffers as needed).
+    depth of its target force (N) at `modulus` (Pa), or to `target_depths` (m) when
+    given (the paper's regime), no deeper than `deepest` (m), and linearise each
+    contact (host: grows the contact buffers as needed).
 
     As in a dataset, a press whose target is out of reach by `deepest` stops there:
     its contact keeps the force it reached (`forces`)."""
@@ -126,6 +127,8 @@ def linearise_contacts(model, probe, modulus: float, points_S, normals_S, target
     modulus_ = jnp.asarray(float(modulus))
     deepest = np.broadcast_to(np.asarray(deepest, dtype=np.float64), targets.shape)
     capacity = fitted = START_CAPACITY
+    if target_depths is not None:
+        return _linearised(model, probe, modulus_, points, normals_S, directions, rotations, np.minimum(np.asarray(target_depths, dtype=np.float64), deepest), fitted)
 
     def grown(kernel, depths, start):
         result, fitted = run_growing(lambda c: kernel(model, probe, c, jnp.asarray(depths), points, directions, rotations), start)
@@ -157,18 +160,21 @@ def linearise_contacts(model, probe, modulus: float, points_S, normals_S, target
         x_old, f_old = x, f
         x = np.where((slope > 0.0) & (secant > low) & (secant < high), secant, 0.5 * (low + high))
         x = np.where(np.abs(f) < 1e-6, x_old, x)  # converged: stay
-    depths = np.exp(x)
     # Sized to the last iterate's contacts, not the deepest met: the linearised contact
     # compiles in about a minute on a laptop CPU and its memory grows with the buffers.
-    linear, _ = grown(_linear_kernel, depths, fitted)
+    return _linearised(model, probe, modulus_, points, normals_S, directions, rotations, np.exp(x), fitted)
+
+
+def _linearised(model, probe, modulus, points, normals_S, directions, rotations, depths, capacity) -> DesignContacts:
+    linear, _ = run_growing(lambda c: _linear_kernel(model, probe, c, jnp.asarray(depths), points, directions, rotations), capacity)
     forces = modulus * np.asarray(linear.forces)
     return DesignContacts(
         surfaces=linear.surfaces,
         tangents=linear.tangents,
-        force_jacobians=modulus_ * linear.force_jacobians,
+        force_jacobians=modulus * linear.force_jacobians,
         points_S=points,
         normals_S=jnp.asarray(normals_S, dtype=jnp.float64),
         forces=jnp.asarray(forces),
         depths=jnp.asarray(depths),
-        modulus=modulus_,
+        modulus=modulus,
     )

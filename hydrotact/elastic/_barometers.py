@@ -210,6 +210,78 @@ def calc_receptive_fields(
     return fields
 
 
+class FieldDerivatives(eqx.Module):
+    """How elastic barometers' receptive fields change as their ports move (a pytree):
+    the derivatives of :attr:`ReceptiveFields.responses` (num_nodes, B, 3) along each
+    port's position (`positions`, (num_nodes, B, 3, 3), the last axis the position's
+    x, y, z; Pa / N / m) and its axis (`axes`, likewise, per unit of the axis vector
+    as given, normalised inside; zero for a port reading the pressure, which no axis
+    changes); `num_steps`, `relative_residual` the worst solve's."""
+
+    positions: Float[Array, "num_nodes num_barometers 3 3"]
+    axes: Float[Array, "num_nodes num_barometers 3 3"]
+    num_steps: Int[Array, ""]
+    relative_residual: Float[Array, ""]
+
+
+@eqx.filter_jit
+def _derivatives(problem, ports, vertices, nu, rtol, max_steps, throw, multigrid, with_axes: bool):
+    zeros = jnp.zeros((problem.num_nodes, 3), vertices.dtype)
+
+    def functionals(positions, axes):
+        moved = eqx.tree_at(lambda p: (p.positions_S, p.axes_S), ports, (positions, axes))
+        _, pullback = jax.vjp(lambda u: calc_port_readings(problem, u, moved, nu, vertices), zeros)
+        return jax.vmap(pullback)(jnp.eye(ports.num_barometers, dtype=vertices.dtype))[0]  # (B, num_nodes, 3)
+
+    count = ports.num_barometers
+    eye = jnp.eye(3, dtype=vertices.dtype)
+    along = jnp.concatenate([eye, jnp.zeros_like(eye)], axis=1)  # (3, 6): position, then axis components
+    if with_axes:
+        along = jnp.concatenate([along, jnp.concatenate([jnp.zeros_like(eye), eye], axis=1)])
+    positions, axes = jnp.asarray(ports.positions_S, vertices.dtype), jnp.asarray(ports.axes_S, vertices.dtype)
+
+    def tangent(direction):  # every port moved along the same direction at once: port b's functional depends on port b alone
+        dp, da = jnp.broadcast_to(direction[:3], (count, 3)), jnp.broadcast_to(direction[3:], (count, 3))
+        return jax.jvp(functionals, (positions, axes), (dp, da))[1]
+
+    rhs = jax.vmap(tangent)(along)  # (K, B, num_nodes, 3)
+    mask = (~problem.is_fixed).astype(vertices.dtype)[None, None, :, None]
+    params = (vertices, nu, jnp.asarray(1.0, vertices.dtype))
+    solve = jax.vmap(jax.vmap(lambda b: solve_reduced(problem, params, b, rtol, max_steps, throw, multigrid)))
+    solved, num_steps, relative, result = solve(mask * rhs)
+    solved = jnp.moveaxis(mask * solved, (0, 1), (-1, 1))  # (num_nodes, B, 3, K)
+    axes_part = solved[..., 3:] if with_axes else jnp.zeros_like(solved)
+    return FieldDerivatives(solved[..., :3], axes_part, jnp.max(num_steps), jnp.max(relative)), result
+
+
+def calc_field_derivatives(
+    problem: ElasticProblem,
+    ports: BarometerPorts,
+    *,
+    poisson_ratio=None,
+    vertices=None,
+    rtol: float | None = None,
+    max_steps: int | None = None,
+    throw: bool = True,
+    multigrid=None,
+    with_axes: bool | None = None,
+) -> FieldDerivatives:
+    """The receptive fields' derivatives along every port's position and axis (one
+    solve with the same operator per direction: the field is K^{-1} g(x, a), so its
+    derivative is K^{-1} dg; three solves per port, six where `with_axes`, by default
+    where any port reads the normal stress). What a layout design linearises the
+    fields with. Arguments as :func:`calc_receptive_fields`'s (jittable)."""
+    vertices = jnp.asarray(problem.vertices if vertices is None else vertices)
+    dtype = vertices.dtype
+    nu = jnp.asarray(problem.poisson_ratio if poisson_ratio is None else poisson_ratio, dtype)
+    rtol = _default_rtol(dtype) if rtol is None else rtol
+    max_steps = 20 * problem.num_nodes + 1000 if max_steps is None else max_steps
+    with_axes = bool(np.any(np.asarray(ports.reads_normal_stress))) if with_axes is None else bool(with_axes)
+    derivatives, result = _derivatives(problem, ports, vertices, nu, rtol, max_steps, throw, multigrid, with_axes)
+    del result
+    return derivatives
+
+
 def calc_polygon_node_integrals(vertices, tets, surface):
     """For each contact polygon, the integrals int p N_a dA of its pressure against the
     ten shape functions of its tet, (capacity, 10), N (0 on invalid slots).
