@@ -579,13 +579,85 @@ def test_multigrid_preconditioner_gives_the_same_solution_and_gradients_in_fewer
     np.testing.assert_allclose(float(grads[1]), float(value), rtol=1e-9)  # linear in the load
 
 
-def test_design_refuses_elastic_barometers_with_one_line():
-    """The layout search moves ray-cast taxels only: a sensor with elastic barometers
-    is refused before any work, naming them."""
+def test_design_refuses_a_mixed_sensor_with_one_line():
+    """A design moves elastic barometers or ray-cast taxels, not both at once: a sensor
+    with some of each is refused before any work, naming the elastic ones."""
     from hydrotact import HydrotactError
-    from hydrotact.design import design_layout
+    from hydrotact.design import DesignConfig, design_layout
     from hydrotact.sensors import load_sensor
 
     kinds = ["elastic" if k in (3, 7) else "disk" for k in range(25)]
-    with pytest.raises(HydrotactError, match="barometers b03, b12 are elastic"):
+    with pytest.raises(HydrotactError, match="only barometers b03, b12 are elastic"):
         design_layout(load_sensor(_pad_document(kinds)))
+    with pytest.raises(HydrotactError, match="--field-sizes"):
+        design_layout(load_sensor(_pad_document(["elastic"] * 25)), config=DesignConfig(field_sizes=True))
+
+
+def test_the_linearised_readout_is_exact_at_its_expansion_and_second_order_beside(pad):
+    """A design's readout of elastic barometers at its expansion equals the readings
+    from the fields, and moved by h along a port's position or a normal-stress port's
+    axis it differs from the exact readings (solved anew) by O(h^2): the error falls
+    by 4 when h halves."""
+    from hydrotact.contact import calc_contact_surface, make_pose
+    from hydrotact.design._elastic import ElasticDesigner
+
+    mesh, field, probe, ports, X_SR = pad
+    contacts = _pad_contacts(probe, [np.asarray(X_SR.translation), np.asarray(X_SR.translation) + [1.1e-3, 0.4e-3, 0.0]])
+    radii, readings = np.asarray(ports.port_radii), ["normal_stress" if n else "pressure" for n in np.asarray(ports.reads_normal_stress)]
+    designer = ElasticDesigner(mesh, 0.49, radii, readings)
+    positions, axes = np.asarray(ports.positions_S), np.asarray(ports.axes_S)
+    readout = designer.readout(positions, axes, contacts)
+    surface = calc_contact_surface(field, probe, make_pose(np.asarray(X_SR.translation)), _capacity())
+    fields = elastic.calc_receptive_fields(elastic.make_elastic_problem(mesh, 0.49), ports, rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(readout.tau[0]), np.asarray(elastic.calc_elastic_readings(fields, surface)) / 1e5, rtol=1e-7)
+    for name, move in (("position", np.array([0.4e-3, -0.3e-3, 0.2e-3])), ("axis", np.array([0.12, -0.08, 0.0]))):
+        errors = []
+        for h in (1.0, 0.5):
+            moved_positions = positions + (h * move if name == "position" else 0.0)
+            moved_axes = axes + (h * move if name == "axis" else 0.0)
+            moved_axes = moved_axes / np.linalg.norm(moved_axes, axis=1, keepdims=True)
+            linear, _ = readout.at(jnp.asarray(moved_positions), jnp.asarray(moved_axes))
+            exact = designer.readout(moved_positions, moved_axes, contacts, derivatives=False).tau
+            errors.append(float(jnp.max(jnp.abs(linear - exact)[:, 1 if name == "axis" else slice(None)])))
+        assert errors[1] < 0.35 * errors[0], (name, errors)
+
+
+def _pad_contacts(probe, translations):
+    """DesignContacts of the probe pressed straight down to the given translations on
+    the coarse pad (its unit surfaces are per pascal of E)."""
+    from hydrotact.design._contacts import linearise_contacts
+    from hydrotact.sensors import load_sensor
+    from hydrotact.sim import make_sensor_model
+
+    model = make_sensor_model(load_sensor(_pad_document(["disk"] * 25)), num_rays=1)
+    points = np.array([[t[0], t[1], 4e-3] for t in translations])
+    normals = np.tile([0.0, 0.0, 1.0], (len(points), 1))
+    depths = np.array([4e-3 - t[2] for t in translations])
+    return linearise_contacts(model, probe, 1e5, points, normals, np.ones(len(points)), np.full(len(points), 2e-3), np.zeros((len(points), 3)), target_depths=depths)
+
+
+def test_design_moves_elastic_barometers_through_their_fields(tmp_path):
+    """`hydrotact design` of a pad whose barometers are all elastic: the layout moves
+    (rounds on the linearised readings, each solved exactly), its exact score only
+    rises over the rounds, the designed sensor is feasible, elastic, reads as the
+    start did, and scores at least as well as its start on the design's contacts."""
+    import json
+
+    from hydrotact.cli import main
+    from hydrotact.sensors import load_sensor
+
+    sensor = tmp_path / "pad.json"
+    sensor.write_text(json.dumps(_pad_document(["elastic"] * 25)))
+    output = tmp_path / "designed.json"
+    status = main([
+        "design", "--sensor", str(sensor), "--barometers", "4", "--contacts", "16", "--restarts", "1", "--steps", "8", "--expansions", "2",
+        "--probe", "sphere:r=3mm,subdivisions=1", "--target", "depth", "--depth-range", "0.0003,0.0008", "-o", str(output), "--json",
+    ])
+    assert status == 0
+    designed = load_sensor(output)
+    assert designed.is_elastic.all() and designed.num_taxels == 4 and designed.taxel_elastic_readings == ("pressure",) * 4
+    np.testing.assert_allclose(designed.taxel_field_sizes, 0.6e-3)
+    assert np.allclose(designed.taxel_positions_S[:, 2], 0.0, atol=1e-9)  # on the board, as the pad's own
+    report = json.loads((tmp_path / "designed_report.json").read_text())
+    start, final = report["random_starts"][0], report["scores"]["designed"]
+    assert final["score"] > start["score"], (start, final)  # a round was kept: it scored better, exactly

@@ -44,8 +44,14 @@ def add_parser(subparsers):
     parser.add_argument("--material", type=Path, metavar="MATERIAL.json", help="the elastomer (its E(0) is used); default: elastic, --modulus")
     parser.add_argument("--modulus", type=number, metavar="E", help="elastic modulus in Pa, without --material (default 1e7, the dataset generator's)")
     parser.add_argument("--probe", metavar="SPEC", help="the indenter (default: the dataset regime's, sphere:r=3mm)")
+    parser.add_argument(
+        "--expansions", type=int, default=default("expansions"), metavar="N",
+        help=f"elastic barometers: rounds per start, each on the readings linearised at its start (default {default('expansions')})")
+    parser.add_argument(
+        "--trust-radius", type=number, default=default("trust_radius"), metavar="M",
+        help=f"elastic barometers: the furthest a round moves a port from where it was linearised, m (default {default('trust_radius'):g})")
     parser.add_argument("--target", choices=["force", "depth"], default="force", help="the contacts pressed to the dataset regime's forces (default) or to its depths (the paper's regime)")
-    parser.add_argument("--depth-range", type=number_pair, metavar="LOW,HIGH", help="target depths with --target depth, m (default: the dataset regime's, 0.0001,0.003)")
+    parser.add_argument("--depth-range", type=number_pair, metavar="LOW,HIGH", help="target depths with --target depth, m (default: the dataset regime's, 0.0001,0.002)")
     parser.add_argument("--contacts", type=int, default=default("contacts"), metavar="N", help=f"contacts designed for, and as many held out (default {default('contacts')})")
     parser.add_argument("--batch", type=int, default=default("batch"), metavar="N", help=f"contacts per optimiser step, a fresh draw from the pool each step (default {default('batch')})")
     parser.add_argument("--rays", type=int, default=default("num_rays"), metavar="N", help=f"rays per receptive field (default {default('num_rays')})")
@@ -79,7 +85,7 @@ def run(args) -> None:
         objective=args.objective, balance=args.balance,
         contacts=args.contacts, batch=args.batch, num_rays=args.rays, relative_noise=args.relative_noise, noise_floor=args.noise_floor, noise_rms=args.noise,
         placement=args.placement, margin=args.margin, spacing=args.spacing, max_tilt_deg=args.max_tilt, max_height=args.max_height, field_sizes=args.field_sizes,
-        restarts=args.restarts, steps=args.steps, seed=args.seed,
+        restarts=args.restarts, steps=args.steps, seed=args.seed, expansions=args.expansions, trust_radius=args.trust_radius,
     )
     regime = {"target": args.target} | ({} if args.probe is None else {"probe": args.probe})
     if args.depth_range is not None:

@@ -19,9 +19,10 @@ import numpy as np
 from .._errors import HydrotactError
 from .._files import atomic_path
 from ..taxel import make_taxel_layout
+from ._elastic import ElasticDesigner, calc_readout_information, climb_elastic
 from ._feasible import Placement, make_feasible_region
 from ._objective import DesignObjective, NoiseModel, calc_neighbour_targets, calc_prior_precision
-from ._search import POSITION_UNIT, START_TAXEL_CAPACITY, _climb, _make_scorer, _score_layout, _size_units  # _climb looked up here: the tests replace it
+from ._search import POSITION_UNIT, START_TAXEL_CAPACITY, _climb, _make_scorer, _score_information, _score_layout, _size_units  # _climb looked up here: the tests replace it
 
 OBJECTIVE_DESCRIPTIONS = {
     DesignObjective.D: "D-optimal (mean log det of the Fisher information of contact point and force)",
@@ -73,6 +74,12 @@ class DesignConfig:
     0.03 rad on every axis moves it about as much as 0.3 mm on every port),
     both decaying to a tenth along a cosine; stopping early after `patience` steps
     without a gain; `seed` of every draw.
+
+    **Elastic barometers** (:mod:`._elastic`): the steps are split into `expansions`
+    rounds, each on the readings linearised at its start (the fields' derivatives,
+    three solves per barometer), moving no port further than `trust_radius` (m); the
+    layout a round reaches is solved exactly and kept only if it scores better (else
+    the radius halves).
     """
 
     objective: str = "k"
@@ -96,12 +103,14 @@ class DesignConfig:
     axis_learning_rate: float = 0.02
     patience: int = 25
     seed: int = 0
+    expansions: int = 3
+    trust_radius: float = 1e-3
 
     def __post_init__(self):
         DesignObjective.parse(self.objective, "objective")
         if self.placement is not None:
             Placement.parse(self.placement, "placement")
-        for name, low in (("contacts", 3), ("batch", 1), ("eval_every", 1), ("num_rays", 1), ("restarts", 0), ("steps", 0), ("patience", 1)):
+        for name, low in (("contacts", 3), ("batch", 1), ("eval_every", 1), ("num_rays", 1), ("restarts", 0), ("steps", 0), ("patience", 1), ("expansions", 1)):
             value = getattr(self, name)
             if not isinstance(value, int | np.integer) or isinstance(value, bool) or value < low:
                 raise HydrotactError(f"--{name.replace('_', '-')}: must be a whole number of at least {low}, got {value!r}")
@@ -112,6 +121,8 @@ class DesignConfig:
                 raise HydrotactError(f"--{name.replace('_', '-')}: must be a {'positive' if rate else 'non-negative'} number, got {value!r}")
         if isinstance(self.balance, bool) or not isinstance(self.balance, int | float | np.floating) or not (np.isfinite(self.balance) and self.balance >= 1.0):
             raise HydrotactError(f"--balance: must be a number of at least 1 (1 sums the target's components' errors), got {self.balance!r}")
+        if isinstance(self.trust_radius, bool) or not isinstance(self.trust_radius, int | float | np.floating) or not (np.isfinite(self.trust_radius) and 1e-6 <= self.trust_radius <= 0.05):
+            raise HydrotactError(f"--trust-radius: must be a length in m within 1e-6-0.05, got {self.trust_radius!r}")
         if self.noise_rms is not None and not (np.isfinite(self.noise_rms) and self.noise_rms >= 0.0):
             raise HydrotactError(f"--noise: must be a non-negative pressure in Pa, got {self.noise_rms!r}")
         if self.max_height is not None and (isinstance(self.max_height, bool) or not isinstance(self.max_height, int | float | np.floating) or not np.isfinite(self.max_height)):
@@ -220,14 +231,16 @@ def design_layout(
     config = config or DesignConfig()
     regime = regime or DatasetConfig()
     spec = sensor if isinstance(sensor, SensorSpec) else load_sensor(sensor)
-    if spec.is_elastic.any():
-        # The layout's gradient reaches the ray-cast taxels only: an elastic barometer's
-        # receptive field is solved for its port on the host, so the search would not move it.
-        names = ", ".join(name for name, elastic in zip(spec.taxel_names, spec.is_elastic, strict=True) if elastic)
+    elastic = bool(spec.is_elastic.any())
+    if elastic and not spec.is_elastic.all():
+        # One readout per design: elastic barometers' linearised fields, or ray-cast taxels.
+        names = ", ".join(name for name, is_elastic in zip(spec.taxel_names, spec.is_elastic, strict=True) if is_elastic)
         raise HydrotactError(
-            f"{spec.source}: design moves ray-cast taxels (disk, cone) only, and barometers {names} are elastic; "
-            "design the layout with disk or cone fields, then make them elastic"
+            f"{spec.source}: design moves either elastic barometers or ray-cast taxels (disk, cone), and only barometers {names} are elastic; "
+            "make every barometer elastic, or none"
         )
+    if elastic and config.field_sizes:
+        raise HydrotactError(f"{spec.source}: --field-sizes designs ray-cast fields' sizes; an elastic barometer's port radius is its part's")
     count = spec.num_taxels if num_barometers is None else num_barometers
     if not isinstance(count, int | np.integer) or isinstance(count, bool) or count < 1:
         raise HydrotactError(f"--barometers: must be a whole number of at least 1, got {count!r}")
@@ -261,13 +274,25 @@ def design_layout(
     size = float(np.median(spec.taxel_field_sizes))
     kinds = spec.taxel_field_kinds if count == spec.num_taxels else (kind,) * count
     sizes = spec.taxel_field_sizes if count == spec.num_taxels else np.full(count, size)
-    template = make_taxel_layout(np.zeros((count, 3)), np.tile([0.0, 0.0, 1.0], (count, 1)), kinds, sizes)
+    elastic_readings = spec.taxel_elastic_readings if count == spec.num_taxels else (spec.taxel_elastic_readings[0],) * count
+    # An elastic design's template only carries the sizes' units (mm, as a disk's).
+    template = make_taxel_layout(np.zeros((count, 3)), np.tile([0.0, 0.0, 1.0], (count, 1)), ("disk",) * count if elastic else kinds, sizes)
+    designer = ElasticDesigner(mesh, spec.poisson_ratio, sizes, elastic_readings, source=spec.name, progress=progress) if elastic else None
+    rms = lambda errors: float(np.sqrt(np.mean(errors**2)))
+
+    def exact_score(readout, positions, axes, which=None):
+        chosen, chosen_targets = (contacts, targets) if which is None else which
+        information = calc_readout_information(readout, jnp.asarray(positions), jnp.asarray(axes / np.linalg.norm(axes, axis=1, keepdims=True)), chosen, noise)
+        return _score_information(information, chosen_targets, noise, prior, objective, config.balance)
 
     def score(positions, axes, sizes_, capacity):
+        if designer is not None:
+            value = exact_score(designer.readout(positions, axes, contacts, derivatives=False), positions, axes)[0]
+            held, bounds, neighbour = exact_score(designer.readout(positions, axes, held_out, derivatives=False), positions, axes, (held_out, held_out_targets))
+            return LayoutScore(float(value), float(held), bounds, rms(bounds), neighbour, rms(neighbour)), capacity
         layout = make_taxel_layout(positions, axes, kinds, sizes_)
         value, _, _, capacity = _score_layout(layout, contacts, targets, noise, prior, objective, config.num_rays, capacity, config.balance)
         held, bounds, neighbour, capacity = _score_layout(layout, held_out, held_out_targets, noise, prior, objective, config.num_rays, capacity, config.balance)
-        rms = lambda errors: float(np.sqrt(np.mean(errors**2)))
         return LayoutScore(value, held, bounds, rms(bounds), neighbour, rms(neighbour)), capacity
 
     capacity = START_TAXEL_CAPACITY
@@ -312,22 +337,28 @@ def design_layout(
                     best_positions, best_axes, best_sizes, history = (saved[k] for k in ("positions", "axes", "sizes", "history"))
             else:
                 start_rng = np.random.default_rng([config.seed, len(results)])  # the same minibatches whether resumed or not
-                best_positions, best_axes, best_sizes, history, capacity = _climb(
-                    region, scorer, pool_score, template, positions, axes, sizes, climbing, capacity, start_rng, on_step
-                )
+                if designer is not None:
+                    best_positions, best_axes, best_sizes, history, capacity = climb_elastic(
+                        designer, region, contacts, targets, noise, prior, objective, template, positions, axes, sizes, climbing, capacity, start_rng, on_step,
+                        lambda readout, p, a: float(exact_score(readout, p, a)[0]),
+                    )
+                else:
+                    best_positions, best_axes, best_sizes, history, capacity = _climb(
+                        region, scorer, pool_score, template, positions, axes, sizes, climbing, capacity, start_rng, on_step
+                    )
                 if kept is not None:
                     with atomic_path(kept, suffix=".npz") as tmp:
                         np.savez(tmp, positions=best_positions, axes=best_axes, sizes=best_sizes, history=history)
             results.append((float(history[:, 1].max()), best_positions, best_axes, best_sizes))
             histories.append(history)
-            bar.update(config.steps + 1 - (bar.n - before))
+            bar.update(max(0, config.steps + 1 - (bar.n - before)))
     best = max(range(len(results)), key=lambda i: results[i][0])
     _, positions, axes, sizes_best = results[best]
     problems = region.violations(positions, axes)
     if problems:
         raise HydrotactError(f"the designed layout breaks its constraints: {problems[0]}")
     designed, capacity = score(positions, axes, sizes_best, capacity)
-    designed_spec = _with_layout(spec, positions, axes, kinds, sizes_best, config, objective)
+    designed_spec = _with_layout(spec, positions, axes, kinds, sizes_best, config, objective, elastic_readings)
     return LayoutDesign(
         spec=designed_spec, start_spec=spec, config=config, regime=regime, designed=designed, builtin=builtin, random=random_scores,
         histories=histories, start_names=[name for name, _, _ in named], start_layouts=[(positions, axes) for _, positions, axes in named],
@@ -386,7 +417,7 @@ def _modulus(material, modulus, default: float) -> float:
     return float(material_prony(document, source=str(material) if not isinstance(material, dict) else "material document").instantaneous_modulus)
 
 
-def _with_layout(spec, positions, axes, kinds, sizes, config: DesignConfig, objective):
+def _with_layout(spec, positions, axes, kinds, sizes, config: DesignConfig, objective, readings=None):
     """A copy of `spec` with the designed layout (channels b0..), its description
     saying how it was designed, checked like any spec read from a file."""
     from ..sensors import load_sensor
@@ -402,5 +433,6 @@ def _with_layout(spec, positions, axes, kinds, sizes, config: DesignConfig, obje
     designed = dataclasses.replace(
         spec, name=f"{spec.name}_designed", description=description, taxel_names=tuple(names), taxel_positions_S=np.asarray(positions), taxel_axes_S=np.asarray(axes),
         taxel_field_kinds=tuple(kinds), taxel_field_sizes=np.asarray(sizes, dtype=np.float64),
+        taxel_elastic_readings=tuple(readings) if readings is not None else ("pressure",) * count,
     )
     return load_sensor(designed.to_json(), source=f"the layout designed for {spec.name}")

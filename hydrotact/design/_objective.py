@@ -125,17 +125,25 @@ def calc_layout_information(
 
         tau, sampled = pressures(surface)
         d_tau = jax.vmap(lambda t: jax.jvp(lambda s: pressures(s)[0], (surface,), (t,))[1])(tangents).T  # (T, 3) per unit q
-        # A = dθ/dq: u and v pass, F(q); J_θ = J_q A⁻¹ with A⁻¹ = [[1, 0, 0], [0, 1, 0], -F_q[:2]/F_d, 1/F_d].
-        f_u, f_v, f_d = force_jacobian
-        inverse = jnp.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-f_u / f_d, -f_v / f_d, 1.0 / f_d]])
-        readings = contacts.modulus * tau
-        jacobian = contacts.modulus * d_tau @ inverse
-        heard = (readings < noise.limit)[:, None]
-        weighted = jnp.where(heard, jacobian, 0.0) / jnp.sqrt(noise.variances(readings))[:, None]
-        return weighted.T @ weighted, readings, sampled.did_overflow, sampled.needed
+        information, readings = calc_contact_information(tau, d_tau, force_jacobian, contacts.modulus, noise)
+        return information, readings, sampled.did_overflow, sampled.needed
 
     information, readings, overflow, needed = jax.vmap(one)(contacts.surfaces, contacts.tangents, contacts.force_jacobians)
     return LayoutInformation(information, readings, overflow, needed)
+
+
+def calc_contact_information(tau, d_tau, force_jacobian, modulus, noise: NoiseModel):
+    """One contact's Fisher information of (u, v, F) (3, 3) and readings (T,) Pa from
+    its unit readings `tau` (T,) (per pascal of E) and their derivatives `d_tau`
+    (T, 3) along q = (u, v, d), its force's `force_jacobian` dF/dq (3,) (pure)."""
+    # A = dθ/dq: u and v pass, F(q); J_θ = J_q A⁻¹ with A⁻¹ = [[1, 0, 0], [0, 1, 0], -F_q[:2]/F_d, 1/F_d].
+    f_u, f_v, f_d = force_jacobian
+    inverse = jnp.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-f_u / f_d, -f_v / f_d, 1.0 / f_d]])
+    readings = modulus * tau
+    jacobian = modulus * d_tau @ inverse
+    heard = (readings < noise.limit)[:, None]
+    weighted = jnp.where(heard, jacobian, 0.0) / jnp.sqrt(noise.variances(readings))[:, None]
+    return weighted.T @ weighted, readings
 
 
 def calc_prior_precision(skin_area: float, forces) -> jnp.ndarray:

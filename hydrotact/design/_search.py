@@ -106,13 +106,19 @@ def _score_layout(layout, contacts, targets, noise, prior, objective, num_rays, 
     """(score, each contact's Cramér–Rao bound (m), each contact's leave-one-out
     nearest-neighbour error (m), capacity): both error models, whatever the objective."""
     information, capacity = _grown(lambda c: _information_kernel(layout, contacts, noise, num_rays, c), capacity)
+    return (*_score_information(information, targets, noise, prior, objective, balance), capacity)
+
+
+def _score_information(information, targets, noise, prior, objective, balance=1.0):
+    """(score, bounds, neighbour errors) of :func:`_score_layout` from a layout's
+    LayoutInformation."""
     per_component = calc_neighbour_errors(information.readings, targets, noise, per_component=True)  # once: both the k score and the reported error
     if objective == DesignObjective.K:
         value = float(_balance_neighbour_errors(per_component, balance))
     else:
         value = float(calc_design_score(information.information, prior, objective))
     neighbour = np.sqrt(np.asarray(jnp.sum(per_component, axis=-1)))
-    return value, np.asarray(calc_localisation_bounds(information.information, prior)), neighbour, capacity
+    return value, np.asarray(calc_localisation_bounds(information.information, prior)), neighbour
 
 
 @eqx.filter_jit

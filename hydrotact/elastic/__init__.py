@@ -22,7 +22,7 @@ from ._barometers import (
     calc_surface_loads as calc_surface_loads,
     make_barometer_ports as make_barometer_ports,
 )
-from ._cache import make_receptive_fields as make_receptive_fields
+from ._cache import make_field_derivatives as make_field_derivatives, make_receptive_fields as make_receptive_fields
 from ._loads import (
     FaceQuadrature as FaceQuadrature,
     calc_barycentric as calc_barycentric,

@@ -26,7 +26,7 @@ import numpy as np
 from .._errors import HydrotactError, where
 from .._files import atomic_path, cache_dir, digest, write_text_atomic
 from ..mesh import TetMesh
-from ._barometers import ReceptiveFields, calc_receptive_fields, make_barometer_ports
+from ._barometers import FieldDerivatives, ReceptiveFields, calc_field_derivatives, calc_receptive_fields, make_barometer_ports
 from ._multigrid import make_multigrid_preconditioner
 from ._problem import make_elastic_problem
 
@@ -34,6 +34,7 @@ _CACHE_VERSION = "elastic-field/2"
 # CG must bring the reduced system's relative residual this close to its tolerance.
 _RESIDUAL_SLACK = 1e3
 _RTOL = 1e-10
+_DERIVATIVE_RTOL = 1e-8  # a layout design's linearisation: far below the model's own error
 _DATA = files("hydrotact.elastic") / "data"
 
 
@@ -145,33 +146,80 @@ def make_receptive_fields(
     )
 
 
-def _solve_fields(problem, ports, barometers, progress: bool, source):
-    """[(response (num_nodes, 3), CG steps, relative residual)] of each of `barometers`."""
+def make_field_derivatives(
+    mesh: TetMesh,
+    positions_S,
+    axes_S,
+    port_radii,
+    readings,
+    poisson_ratio,
+    *,
+    cache: bool = True,
+    progress: bool = False,
+    source: str | None = None,
+) -> FieldDerivatives:
+    """The derivatives of elastic barometers' receptive fields along their ports'
+    positions and axes (host; cached by content, per barometer, beside the fields;
+    :func:`hydrotact.elastic.calc_field_derivatives`). Arguments as
+    :func:`make_receptive_fields`'s."""
+    problem = make_elastic_problem(mesh, poisson_ratio, source=source)
+    ports = make_barometer_ports(positions_S, axes_S, port_radii, readings)
+    keys = [digest(key, "derivatives") for key in field_keys(mesh, ports, float(problem.poisson_ratio))]
+    saved = [_load(_field_path(key), key) if cache else None for key in keys]
+    missing = [b for b, found in enumerate(saved) if found is None]
+    if missing:
+        solved = _solve_fields(problem, ports, missing, progress, source, derivatives=True)
+        for b, found in zip(missing, solved, strict=True):
+            saved[b] = found
+            if cache:
+                response, num_steps, relative = found
+                with atomic_path(_field_path(keys[b]), suffix=".npz") as tmp:
+                    np.savez(tmp, key=np.array(keys[b]), response=response, num_steps=np.array(num_steps), relative_residual=np.array(relative))
+    stacked = np.stack([found[0] for found in saved], axis=1)  # (num_nodes, B, 3, 6)
+    return FieldDerivatives(
+        positions=jnp.asarray(stacked[..., :3]),
+        axes=jnp.asarray(stacked[..., 3:]),
+        num_steps=jnp.asarray(max(found[1] for found in saved)),
+        relative_residual=jnp.asarray(max(found[2] for found in saved)),
+    )
+
+
+def _solve_fields(problem, ports, barometers, progress: bool, source, derivatives: bool = False):
+    """[(response (num_nodes, 3), CG steps, relative residual)] of each of `barometers`;
+    with `derivatives`, the response's derivatives along the port's position and axis
+    (num_nodes, 3, 6) instead (the axis' zero for a pressure port)."""
     from tqdm.auto import tqdm
 
     with jax.enable_x64(True):  # a 1e-10 residual is out of float32's reach, whatever the caller's precision
-        return _solve_fields_x64(problem, ports, barometers, progress, source, tqdm)
+        return _solve_fields_x64(problem, ports, barometers, progress, source, tqdm, derivatives)
 
 
-def _solve_fields_x64(problem, ports, barometers, progress, source, tqdm):
+def _solve_fields_x64(problem, ports, barometers, progress, source, tqdm, derivatives):
     max_steps = 20 * problem.num_nodes + 1000
+    rtol = _DERIVATIVE_RTOL if derivatives else _RTOL
+    what = "derivatives of elastic receptive fields" if derivatives else "elastic receptive fields"
     solved = []
-    bar = tqdm(total=len(barometers), desc=f"elastic receptive fields ({problem.num_unknowns} unknowns)", unit="barometer", disable=not progress, leave=False)
+    bar = tqdm(total=len(barometers), desc=f"{what} ({problem.num_unknowns} unknowns)", unit="barometer", disable=not progress, leave=False)
     with bar:
         bar.set_postfix_str("building the multigrid hierarchy")
         multigrid = make_multigrid_preconditioner(problem)
         bar.set_postfix_str(f"{multigrid.num_levels} levels")
         for b in barometers:
             one = type(ports)(*(np.asarray(leaf)[b : b + 1] for leaf in (ports.positions_S, ports.axes_S, ports.port_radii, ports.reads_normal_stress)))
-            fields = calc_receptive_fields(problem, one, rtol=_RTOL, max_steps=max_steps, throw=False, multigrid=multigrid)
-            relative = float(fields.relative_residual)
-            if not (np.isfinite(relative) and relative <= _RESIDUAL_SLACK * _RTOL):
+            if derivatives:
+                found = calc_field_derivatives(problem, one, rtol=rtol, max_steps=max_steps, throw=False, multigrid=multigrid)
+                response = np.concatenate([np.asarray(found.positions)[:, 0], np.asarray(found.axes)[:, 0]], axis=-1)
+            else:
+                found = calc_receptive_fields(problem, one, rtol=rtol, max_steps=max_steps, throw=False, multigrid=multigrid)
+                response = np.asarray(found.responses)[:, 0]
+            relative = float(found.relative_residual)
+            if not (np.isfinite(relative) and relative <= _RESIDUAL_SLACK * rtol):
                 raise HydrotactError(
-                    f"{where(source)}the elastic receptive field of barometer {b} did not converge: relative residual "
-                    f"{relative:.3g} after {int(fields.num_steps)} CG steps (at most {max_steps}); the mesh may have "
+                    f"{where(source)}the {what[:-1] if not derivatives else what} of barometer {b} did not converge: relative residual "
+                    f"{relative:.3g} after {int(found.num_steps)} CG steps (at most {max_steps}); the mesh may have "
                     "degenerate tets, or nu may be too close to 0.5"
                 )
-            solved.append((np.asarray(fields.responses)[:, 0], int(fields.num_steps), relative))
+            solved.append((response, int(found.num_steps), relative))
             bar.update(1)
     return solved
 
