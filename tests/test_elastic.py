@@ -476,7 +476,7 @@ def test_elastic_barometers_in_the_forward_model(tmp_path):
     calls = []
     original = _cache._solve_fields
     try:
-        _cache._solve_fields = lambda *args: calls.append(1) or original(*args)
+        _cache._solve_fields = lambda *args, **kwargs: calls.append(1) or original(*args, **kwargs)
         all_elastic = load_sensor(_pad_document(["elastic"] * 25))
         first = make_sensor_model(all_elastic)
         assert not first.uses_rays
@@ -517,7 +517,7 @@ def test_the_curved_sensors_have_no_blind_patch_under_the_elastic_model(name, mo
     from hydrotact.elastic import _cache
     from hydrotact.sim import make_sensor_model
 
-    monkeypatch.setattr(_cache, "_solve_fields", lambda *args: pytest.fail("the shipped fields were not found"))
+    monkeypatch.setattr(_cache, "_solve_fields", lambda *args, **kwargs: pytest.fail("the shipped fields were not found"))
     monkeypatch.setenv("HYDROTACT_CACHE_DIR", str(tmp_path))  # no field solved before can be read
     spec = _elastic_builtin(name)
     model = make_sensor_model(spec, num_rays=1)

@@ -182,6 +182,15 @@ def _fields(problem, ports, vertices, nu, rtol, max_steps, throw, multigrid):
     ), result
 
 
+def _solve_settings(problem, vertices, poisson_ratio, rtol, max_steps):
+    """(vertices, nu, rtol, max_steps) of a solve, the problem's where not given."""
+    vertices = jnp.asarray(problem.vertices if vertices is None else vertices)
+    nu = jnp.asarray(problem.poisson_ratio if poisson_ratio is None else poisson_ratio, vertices.dtype)
+    rtol = _default_rtol(vertices.dtype) if rtol is None else rtol
+    max_steps = 20 * problem.num_nodes + 1000 if max_steps is None else max_steps
+    return vertices, nu, rtol, max_steps
+
+
 def calc_receptive_fields(
     problem: ElasticProblem,
     ports: BarometerPorts,
@@ -200,11 +209,7 @@ def calc_receptive_fields(
     :func:`make_barometer_ports`; the rest (`multigrid` too) as
     :func:`solve_elasticity`'s.
     """
-    vertices = jnp.asarray(problem.vertices if vertices is None else vertices)
-    dtype = vertices.dtype
-    nu = jnp.asarray(problem.poisson_ratio if poisson_ratio is None else poisson_ratio, dtype)
-    rtol = _default_rtol(dtype) if rtol is None else rtol
-    max_steps = 20 * problem.num_nodes + 1000 if max_steps is None else max_steps
+    vertices, nu, rtol, max_steps = _solve_settings(problem, vertices, poisson_ratio, rtol, max_steps)
     fields, result = _fields(problem, ports, vertices, nu, rtol, max_steps, throw, multigrid)
     del result  # raised inside the solve when `throw`; per-solve codes are not kept
     return fields
@@ -271,11 +276,7 @@ def calc_field_derivatives(
     derivative is K^{-1} dg; three solves per port, six where `with_axes`, by default
     where any port reads the normal stress). What a layout design linearises the
     fields with. Arguments as :func:`calc_receptive_fields`'s (jittable)."""
-    vertices = jnp.asarray(problem.vertices if vertices is None else vertices)
-    dtype = vertices.dtype
-    nu = jnp.asarray(problem.poisson_ratio if poisson_ratio is None else poisson_ratio, dtype)
-    rtol = _default_rtol(dtype) if rtol is None else rtol
-    max_steps = 20 * problem.num_nodes + 1000 if max_steps is None else max_steps
+    vertices, nu, rtol, max_steps = _solve_settings(problem, vertices, poisson_ratio, rtol, max_steps)
     with_axes = bool(np.any(np.asarray(ports.reads_normal_stress))) if with_axes is None else bool(with_axes)
     derivatives, result = _derivatives(problem, ports, vertices, nu, rtol, max_steps, throw, multigrid, with_axes)
     del result

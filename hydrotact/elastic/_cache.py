@@ -100,6 +100,27 @@ def field_keys(mesh: TetMesh, ports, poisson_ratio: float) -> list[str]:
     ]
 
 
+def _cached_solves(mesh, positions_S, axes_S, port_radii, readings, poisson_ratio, cache, progress, source, derivatives):
+    """(problem, [(array, CG steps, relative residual)] per barometer): each read from
+    the cache (or, for fields, the shipped data) or solved and written there."""
+    problem = make_elastic_problem(mesh, poisson_ratio, source=source)
+    ports = make_barometer_ports(positions_S, axes_S, port_radii, readings)
+    keys = field_keys(mesh, ports, float(problem.poisson_ratio))
+    if derivatives:
+        keys = [digest(key, "derivatives") for key in keys]
+    saved = [(_load(_field_path(key), key) or (None if derivatives else _load_shipped(key))) if cache else None for key in keys]
+    missing = [b for b, found in enumerate(saved) if found is None]
+    if missing:
+        solved = _solve_fields(problem, ports, missing, progress, source, derivatives=derivatives)
+        for b, found in zip(missing, solved, strict=True):
+            saved[b] = found
+            if cache:
+                response, num_steps, relative = found
+                with atomic_path(_field_path(keys[b]), suffix=".npz") as tmp:
+                    np.savez(tmp, key=np.array(keys[b]), response=response, num_steps=np.array(num_steps), relative_residual=np.array(relative))
+    return problem, saved
+
+
 def make_receptive_fields(
     mesh: TetMesh,
     positions_S,
@@ -123,19 +144,7 @@ def make_receptive_fields(
 
     **Returns:** :class:`ReceptiveFields` in float64.
     """
-    problem = make_elastic_problem(mesh, poisson_ratio, source=source)
-    ports = make_barometer_ports(positions_S, axes_S, port_radii, readings)
-    keys = field_keys(mesh, ports, float(problem.poisson_ratio))
-    saved = [(_load(_field_path(key), key) or _load_shipped(key)) if cache else None for key in keys]
-    missing = [b for b, found in enumerate(saved) if found is None]
-    if missing:
-        solved = _solve_fields(problem, ports, missing, progress, source)
-        for b, found in zip(missing, solved, strict=True):
-            saved[b] = found
-            if cache:
-                response, num_steps, relative = found
-                with atomic_path(_field_path(keys[b]), suffix=".npz") as tmp:
-                    np.savez(tmp, key=np.array(keys[b]), response=response, num_steps=np.array(num_steps), relative_residual=np.array(relative))
+    problem, saved = _cached_solves(mesh, positions_S, axes_S, port_radii, readings, poisson_ratio, cache, progress, source, derivatives=False)
     return ReceptiveFields(
         vertices=jnp.asarray(problem.vertices),
         tets=jnp.asarray(problem.tets),
@@ -162,19 +171,7 @@ def make_field_derivatives(
     positions and axes (host; cached by content, per barometer, beside the fields;
     :func:`hydrotact.elastic.calc_field_derivatives`). Arguments as
     :func:`make_receptive_fields`'s."""
-    problem = make_elastic_problem(mesh, poisson_ratio, source=source)
-    ports = make_barometer_ports(positions_S, axes_S, port_radii, readings)
-    keys = [digest(key, "derivatives") for key in field_keys(mesh, ports, float(problem.poisson_ratio))]
-    saved = [_load(_field_path(key), key) if cache else None for key in keys]
-    missing = [b for b, found in enumerate(saved) if found is None]
-    if missing:
-        solved = _solve_fields(problem, ports, missing, progress, source, derivatives=True)
-        for b, found in zip(missing, solved, strict=True):
-            saved[b] = found
-            if cache:
-                response, num_steps, relative = found
-                with atomic_path(_field_path(keys[b]), suffix=".npz") as tmp:
-                    np.savez(tmp, key=np.array(keys[b]), response=response, num_steps=np.array(num_steps), relative_residual=np.array(relative))
+    _, saved = _cached_solves(mesh, positions_S, axes_S, port_radii, readings, poisson_ratio, cache, progress, source, derivatives=True)
     stacked = np.stack([found[0] for found in saved], axis=1)  # (num_nodes, B, 3, 6)
     return FieldDerivatives(
         positions=jnp.asarray(stacked[..., :3]),
