@@ -136,6 +136,18 @@ def test_contacts_reach_their_forces_and_the_information_changes_variables_exact
     )
 
 
+def test_a_press_that_does_not_touch_carries_no_information():
+    """A drawn depth where the skin gives no force (its force's Jacobian is zero) adds
+    nothing to the information, not NaN: the prior keeps its score finite."""
+    from hydrotact.design._objective import calc_contact_information
+
+    noise = NoiseModel(*(jnp.asarray(v) for v in (0.03, 0.016, 20.0, 0.05, 2e4)))
+    information, readings = calc_contact_information(jnp.zeros(4), jnp.zeros((4, 3)), jnp.zeros(3), 1e7, noise)
+    np.testing.assert_array_equal(np.asarray(information), 0.0)
+    touching, _ = calc_contact_information(jnp.full(4, 1e-4), jnp.ones((4, 3)), jnp.array([0.0, 0.0, 1e4]), 1e7, noise)
+    assert np.all(np.isfinite(np.asarray(touching))) and float(touching[0, 0]) > 0.0
+
+
 def test_the_neighbour_estimator_meets_its_closed_forms(linearised):
     _, _, noise, _ = linearised
     rng = np.random.default_rng(3)

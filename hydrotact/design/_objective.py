@@ -137,11 +137,15 @@ def calc_contact_information(tau, d_tau, force_jacobian, modulus, noise: NoiseMo
     its unit readings `tau` (T,) (per pascal of E) and their derivatives `d_tau`
     (T, 3) along q = (u, v, d), its force's `force_jacobian` dF/dq (3,) (pure)."""
     # A = dθ/dq: u and v pass, F(q); J_θ = J_q A⁻¹ with A⁻¹ = [[1, 0, 0], [0, 1, 0], -F_q[:2]/F_d, 1/F_d].
+    # A press that does not touch (a drawn depth where the skin gives no force) has no
+    # F to learn: it carries no information (the prior keeps it finite).
     f_u, f_v, f_d = force_jacobian
+    touching = f_d > 0.0
+    f_d = jnp.where(touching, f_d, 1.0)
     inverse = jnp.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-f_u / f_d, -f_v / f_d, 1.0 / f_d]])
     readings = modulus * tau
     jacobian = modulus * d_tau @ inverse
-    heard = (readings < noise.limit)[:, None]
+    heard = (readings < noise.limit)[:, None] & touching
     weighted = jnp.where(heard, jacobian, 0.0) / jnp.sqrt(noise.variances(readings))[:, None]
     return weighted.T @ weighted, readings
 
