@@ -9,8 +9,8 @@ round), each event taking as many samples as its force so far predicts it still 
 approach E(0) F(s)·d has reached its target stops, and its hold depth is interpolated
 linearly between its last two samples (the approach samples find the depth; there is no
 separate search). An event with a target depth (the paper's regime) marches to the
-first sample at or past it and holds at the depth itself. The holds (one pose each) are computed last. The retract retraces
-the approach's poses in reverse.
+first sample at or past it and holds at the depth itself. The holds (one pose each)
+are computed last. The retract retraces the approach's poses in reverse.
 
 Then the session's timeline is laid out (gap, approach, hold, retract per event) and
 the whole of it goes through :func:`hydrotact.sim.calc_samples` at once: the
