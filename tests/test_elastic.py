@@ -598,10 +598,11 @@ def test_the_linearised_readout_is_exact_at_its_expansion_and_second_order_besid
     from the fields, and moved by h along a port's position or a normal-stress port's
     axis it differs from the exact readings (solved anew) by O(h^2): the error falls
     by 4 when h halves."""
-    from hydrotact.contact import calc_contact_surface, make_pose
+    from hydrotact.contact import calc_contact_surface, make_pose, make_sphere_probe
     from hydrotact.design._elastic import ElasticDesigner
 
-    mesh, field, probe, ports, X_SR = pad
+    mesh, field, _, ports, X_SR = pad
+    probe = make_sphere_probe(3e-3, subdivisions=1)  # the coarse sphere (fewer polygons)
     contacts = _pad_contacts(probe, [np.asarray(X_SR.translation), np.asarray(X_SR.translation) + [1.1e-3, 0.4e-3, 0.0]])
     radii, readings = np.asarray(ports.port_radii), ["normal_stress" if n else "pressure" for n in np.asarray(ports.reads_normal_stress)]
     designer = ElasticDesigner(mesh, 0.49, radii, readings)
