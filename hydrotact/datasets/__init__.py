@@ -16,6 +16,7 @@ from ._events import (
     EventPlan as EventPlan,
     Skin as Skin,
     calc_approach_thickness as calc_approach_thickness,
+    draw_hold_targets as draw_hold_targets,
     draw_target_forces as draw_target_forces,
     find_touchable_skin as find_touchable_skin,
     pressing_rotation_vectors as pressing_rotation_vectors,

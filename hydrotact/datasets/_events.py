@@ -145,18 +145,23 @@ def draw_target_forces(config: DatasetConfig, count: int, rng: np.random.Generat
     return rng.uniform(low, high, count)
 
 
+def draw_hold_targets(config: DatasetConfig, count: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """(target forces N, target depths m) of `count` holds, as the config's target
+    says (:data:`TARGETS`): the one not drawn is NaN. One draw in the force's place, so
+    a force-target regime draws as it did before depths were offered."""
+    nothing = np.full(count, np.nan)
+    if config.target == "depth":
+        return nothing, rng.uniform(*config.depth_range, count)
+    return draw_target_forces(config, count, rng), nothing
+
+
 def sample_events(skin: Skin, config: DatasetConfig, rng: np.random.Generator) -> EventPlan:
     """Draw `config.events` events (see :class:`EventPlan`), in a fixed order of draws."""
     count = config.events
     points, normals, _ = sample_skin_points(skin, count, rng)
     directions, tilts = _tilt(-normals, np.radians(config.max_tilt_deg), rng)
     thickness = calc_approach_thickness(skin, points, directions)
-    # One draw in the force's place, so a force-target plan's draws are as before.
-    nothing = np.full(count, np.nan)
-    if config.target == "depth":
-        forces, depths = nothing, rng.uniform(*config.depth_range, count)
-    else:
-        forces, depths = draw_target_forces(config, count, rng), nothing
+    forces, depths = draw_hold_targets(config, count, rng)
     return EventPlan(
         points=points,
         normals=normals,

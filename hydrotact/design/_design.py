@@ -183,14 +183,13 @@ def draw_design_contacts(spec, model, regime, modulus: float, count: int, rng: n
     skin, pressed along the inward normal to target forces (or depths) drawn like a
     dataset's, no deeper than the regime allows (:func:`linearise_contacts`)."""
     from ..contact import parse_probe
-    from ..datasets import calc_approach_thickness, draw_target_forces, find_touchable_skin, pressing_rotation_vectors, sample_skin_points
+    from ..datasets import calc_approach_thickness, draw_hold_targets, find_touchable_skin, pressing_rotation_vectors, sample_skin_points
     from ._contacts import linearise_contacts
 
     skin = find_touchable_skin(spec, spec.make_mesh(check=False))
     points, normals, _ = sample_skin_points(skin, count, rng)
-    by_depth = regime.target == "depth"
-    forces = np.ones(count) if by_depth else draw_target_forces(regime, count, rng)
-    depths = rng.uniform(*regime.depth_range, count) if by_depth else None
+    forces, depths = draw_hold_targets(regime, count, rng)
+    depths = depths if regime.target == "depth" else None
     deepest = np.minimum(regime.max_depth, regime.max_depth_fraction * calc_approach_thickness(skin, points, -normals))
     contacts = linearise_contacts(model, parse_probe(regime.probe), modulus, points, normals, forces, deepest, pressing_rotation_vectors(-normals), target_depths=depths)
     return contacts, skin.area
