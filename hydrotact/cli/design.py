@@ -15,6 +15,7 @@ PER_CONTACT = ("localisation_bounds", "neighbour_errors")
 
 
 def add_parser(subparsers):
+    from ..datasets import TARGETS, DatasetConfig
     from ..design import DesignConfig
 
     d = DesignConfig.__dataclass_fields__
@@ -50,7 +51,7 @@ def add_parser(subparsers):
     parser.add_argument(
         "--trust-radius", type=number, default=default("trust_radius"), metavar="M",
         help=f"elastic barometers: the furthest a round moves a port from where it was linearised, m (default {default('trust_radius'):g})")
-    parser.add_argument("--target", choices=["force", "depth"], default="force", help="the contacts pressed to the dataset regime's forces (default) or to its depths (the paper's regime)")
+    parser.add_argument("--target", choices=list(TARGETS), default=DatasetConfig().target, help="the contacts pressed to the dataset regime's forces (default) or to its depths (the paper's regime)")
     parser.add_argument("--depth-range", type=number_pair, metavar="LOW,HIGH", help="target depths with --target depth, m (default: the dataset regime's, 0.0001,0.002)")
     parser.add_argument("--contacts", type=int, default=default("contacts"), metavar="N", help=f"contacts designed for, and as many held out (default {default('contacts')})")
     parser.add_argument("--batch", type=int, default=default("batch"), metavar="N", help=f"contacts per optimiser step, a fresh draw from the pool each step (default {default('batch')})")

@@ -141,6 +141,14 @@ class ElasticDesigner:
         )
 
 
+def _clip_to_balls(points, centres, radius: float):
+    """Each point (n, 3) moved onto the ball of `radius` about its centre where it lies
+    outside it."""
+    offsets = np.asarray(points) - centres
+    lengths = np.linalg.norm(offsets, axis=1, keepdims=True)
+    return centres + offsets * np.minimum(1.0, radius / np.maximum(lengths, 1e-300))
+
+
 class TrustRegion:
     """A feasible region whose position projection also keeps each port within
     `radius` of its expansion (and each axis within `axis_radius`), the round's trust
@@ -151,15 +159,10 @@ class TrustRegion:
         self.radius, self.axis_radius = float(radius), float(axis_radius)
 
     def project_positions(self, positions):
-        offsets = np.asarray(positions) - self.centres
-        lengths = np.linalg.norm(offsets, axis=1, keepdims=True)
-        inside = self.centres + offsets * np.minimum(1.0, self.radius / np.maximum(lengths, 1e-300))
-        return self.region.project_positions(inside)
+        return self.region.project_positions(_clip_to_balls(positions, self.centres, self.radius))
 
     def project_axes(self, axes):
-        offsets = np.asarray(axes) - self.centre_axes
-        lengths = np.linalg.norm(offsets, axis=1, keepdims=True)
-        return self.region.project_axes(self.centre_axes + offsets * np.minimum(1.0, self.axis_radius / np.maximum(lengths, 1e-300)))
+        return self.region.project_axes(_clip_to_balls(axes, self.centre_axes, self.axis_radius))
 
     def violations(self, positions, axes):
         return self.region.violations(positions, axes)
