@@ -78,7 +78,7 @@ def run(args) -> None:
     from .._files import check_output, write_text_atomic
     from ..datasets import DatasetConfig
     from ..design import DesignConfig, design_layout
-    from ..design._design import OBJECTIVE_DESCRIPTIONS, OBJECTIVE_SCORES
+    from ..design._config import OBJECTIVE_DESCRIPTIONS, OBJECTIVE_SCORES
     from ..sensors import document_text
 
     output = check_output(args.output, suffixes=(".json",), what="the designed sensor")

@@ -9,11 +9,9 @@ objective's (a nearest-neighbour estimator's leave-one-out localisation error); 
 the constraints (inside the elastomer or on the board, spacing, unit axes within a tilt).
 """
 
+from ._config import DesignConfig as DesignConfig, LayoutDesign as LayoutDesign, LayoutScore as LayoutScore
 from ._contacts import DesignContacts as DesignContacts, linearise_contacts as linearise_contacts
 from ._design import (
-    DesignConfig as DesignConfig,
-    LayoutDesign as LayoutDesign,
-    LayoutScore as LayoutScore,
     design_layout as design_layout,
     draw_design_contacts as draw_design_contacts,
     make_noise_model as make_noise_model,
