@@ -39,7 +39,9 @@ REGIME = DatasetConfig(probe="sphere:r=3mm,subdivisions=1")
 
 @pytest.fixture(scope="module")
 def sphere8():
-    spec = load_sensor("sphere8")
+    """sphere8's layout under the ray-cast cones: the design of ray taxels (the elastic
+    barometers' design is tested in test_elastic, on a coarse pad)."""
+    spec = load_sensor("sphere8-cones")
     return spec, spec.make_mesh(check=False)
 
 
@@ -229,7 +231,7 @@ def test_the_objective_gradients_match_finite_differences(linearised):
 
 def test_design_command_writes_a_feasible_sensor_that_beats_the_built_in_and_resumes(tmp_path, capsys, sphere8, monkeypatch):
     out = tmp_path / "designed" / "sphere8_layout.json"
-    args = ["design", "--sensor", "sphere8", "--probe", REGIME.probe, "--contacts", 8, "--rays", 8, "--restarts", 1, "--steps", 6, "--spacing", "2.5e-3"]
+    args = ["design", "--sensor", "sphere8-cones", "--probe", REGIME.probe, "--contacts", 8, "--rays", 8, "--restarts", 1, "--steps", 6, "--spacing", "2.5e-3"]
     result = run_main(capsys, *args, "-o", out, "--json")
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)

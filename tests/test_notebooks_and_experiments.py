@@ -94,7 +94,7 @@ def test_ablation_table1_and_fine_tuning_curve_smoke(tmp_path, monkeypatch):
 
 
 def test_layout_design_smoke(tmp_path, monkeypatch):
-    run_experiment(monkeypatch, "layout_design", "--smoke", "--output", tmp_path)
+    run_experiment(monkeypatch, "layout_design", "--smoke", "--sensor", "sphere8-cones", "--output", tmp_path)
     report = json.loads((tmp_path / "layout_design.json").read_text())
     # The smoke leaves out risers-d (the D-optimal objective under the risers' constraints: both run here).
     assert set(report["designs"]) == {"risers", "inside"}
@@ -126,7 +126,7 @@ def test_layout_design_smoke(tmp_path, monkeypatch):
     assert not np.array_equal(designed["b0"], regular["b0"])
 
     designed = load_sensor(tmp_path / "layout_design_sensor.json")
-    assert designed.num_taxels == 8 and designed.name == "sphere8_designed"
+    assert designed.num_taxels == 8 and designed.name == "sphere8-cones_designed"
     for name in ("layout_design.png", "layout_design_layouts.png", "layout_design_convergence.png"):
         assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
     assert "| designed |" in (tmp_path / "layout_design.md").read_text()

@@ -16,7 +16,7 @@ from hydrotact.sensors import BUILTIN_SENSORS, Part, SensorSpec, known_parts, lo
 from hydrotact.sensors._builtins import builtin_documents, builtin_text
 from hydrotact.sensors._inside import calc_winding_numbers, find_points_outside_surface, find_points_outside_tets
 
-EXPECTED_COUNTS = {"pad5x5": 25, "sphere8": 8, "ellipsoid8": 8}
+EXPECTED_COUNTS = {"pad5x5": 25, "sphere8": 8, "ellipsoid8": 8, "sphere8-cones": 8, "ellipsoid8-cones": 8}
 
 
 def _builtin(name):
@@ -95,8 +95,11 @@ def test_pad_grid():
         ("ellipsoid8", (0.33 * 10.7, 0.33 * 9.0, 0.8), (0.6 * 10.7, 0.6 * 9.0, 1.5), 3.4, (-40, 40), (-72, 72)),
     ],
 )
-def test_curved_layouts(name, inner, outer, center_z, theta, phi):
-    spec = load_sensor(name)
+@pytest.mark.parametrize("cones", [False, True], ids=["elastic", "cones"])
+def test_curved_layouts(name, inner, outer, center_z, theta, phi, cones):
+    """The curved built-ins and their -cones twins: one layout, two barometer models
+    (the elastomer's pressure over a 0.5 mm port, or the 40 deg cone on the skin)."""
+    spec = load_sensor(name + "-cones" if cones else name)
     assert spec.taxel_names == tuple(f"b{i}" for i in range(8))
     expected_positions, expected_axes = [[0.0, 0.0, inner[2]]], [[0.0, 0.0, 1.0]]
     for (rx, ry, z), tilt, azimuths in ((inner, 30, (0, 90, 180, 270)), (outer, 60, (60, 180, 300))):
@@ -106,8 +109,14 @@ def test_curved_layouts(name, inner, outer, center_z, theta, phi):
             expected_axes.append([math.sin(t) * math.cos(az), math.sin(t) * math.sin(az), math.cos(t)])
     np.testing.assert_allclose(spec.taxel_positions_S, np.array(expected_positions) * 1e-3, rtol=0, atol=1e-12)
     np.testing.assert_allclose(spec.taxel_axes_S, expected_axes, rtol=0, atol=1e-9)
-    assert spec.taxel_field_kinds == ("cone",) * 8
-    np.testing.assert_allclose(spec.taxel_field_sizes, math.radians(40.0), rtol=1e-15)
+    if cones:
+        assert spec.taxel_field_kinds == ("cone",) * 8
+        np.testing.assert_allclose(spec.taxel_field_sizes, math.radians(40.0), rtol=1e-15)
+    else:
+        assert spec.taxel_field_kinds == ("elastic",) * 8 and spec.taxel_elastic_readings == ("pressure",) * 8
+        np.testing.assert_allclose(spec.taxel_field_sizes, 0.5e-3, rtol=1e-15)
+        assert spec.poisson_ratio == 0.49
+    assert spec.geometry.seed == name
     np.testing.assert_allclose(spec.contact_center_S, [0.0, 0.0, center_z * 1e-3], rtol=1e-15)
     np.testing.assert_allclose(spec.theta_range, np.radians(theta), rtol=1e-15)
     np.testing.assert_allclose(spec.phi_range, np.radians(phi), rtol=1e-15)
@@ -170,7 +179,7 @@ def test_to_json_round_trips(name, tmp_path):
 
 
 def test_units_are_converted(tmp_path):
-    millimetres = _builtin("sphere8")
+    millimetres = _builtin("sphere8-cones")
     metres = copy.deepcopy(millimetres)
     metres["units"] = {"length": "m", "angle": "rad"}
     for taxel in metres["taxels"]:
@@ -273,8 +282,8 @@ BROKEN = {
     "axis of 2 numbers": ("pad5x5", _set(["taxels", 3, "axis"], [0, 1]), ["taxels[3].axis: must have 3 numbers, got 2"]),
     "zero axis": ("sphere8", _set(["taxels", 4, "axis"], [0, 0, 0]), ["taxels[4].axis: must not be zero"]),
     "negative radius": ("pad5x5", _set(["taxels", 7, "receptive_field", "radius"], -1.1), ["taxels[7].receptive_field.radius: must be > 0, got -1.1"]),
-    "half-angle 95 deg": ("sphere8", _set(["taxels", 2, "receptive_field", "half_angle"], 95), ["taxels[2].receptive_field.half_angle: 95 deg is not in (0, 90)"]),
-    "zero half-angle": ("sphere8", _set(["taxels", 0, "receptive_field", "half_angle"], 0), ["taxels[0].receptive_field.half_angle: 0 deg is not in (0, 90)"]),
+    "half-angle 95 deg": ("sphere8-cones", _set(["taxels", 2, "receptive_field", "half_angle"], 95), ["taxels[2].receptive_field.half_angle: 95 deg is not in (0, 90)"]),
+    "zero half-angle": ("sphere8-cones", _set(["taxels", 0, "receptive_field", "half_angle"], 0), ["taxels[0].receptive_field.half_angle: 0 deg is not in (0, 90)"]),
     "unknown field kind": ("sphere8", _set(["taxels", 1, "receptive_field", "kind"], "ring"), ["taxels[1].receptive_field.kind: must be one of \"disk\", \"cone\", \"elastic\", got \"ring\""]),
     "duplicate names": ("pad5x5", _set(["taxels", 6, "name"], "b00"), ["taxels[6].name: 'b00' is already the name of taxels[0]"]),
     "unknown part": ("pad5x5", _set(["part"], "BMP999"), ["part: unknown part 'BMP999'; the known parts are BMP388"]),
@@ -327,7 +336,7 @@ def test_nan_in_a_position(tmp_path):
 
 
 def test_unknown_sensor_name(tmp_path):
-    with pytest.raises(HydrotactError, match="sphere9: neither a built-in sensor \\(pad5x5, sphere8, ellipsoid8\\) nor an existing file"):
+    with pytest.raises(HydrotactError, match="sphere9: neither a built-in sensor \\(pad5x5, sphere8, ellipsoid8, sphere8-cones, ellipsoid8-cones\\) nor an existing file"):
         load_sensor("sphere9")
 
 

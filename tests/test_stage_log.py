@@ -17,12 +17,14 @@ PROBE = "sphere:r=2mm,subdivisions=2"
 MATERIAL = Prony(jnp.asarray(150e3), jnp.asarray([18e3, 22e3]), jnp.asarray([0.5, 5.0]))
 SESSION = StageSession(
     sites=tuple(map(tuple, make_site_grid(2, 3, pitch=1e-3))),
+    depth_range=(1.0e-3, 1.6e-3),
     hold_range=(2.0, 4.0),
     rest_range=(0.2, 1.0),
     lead=2.0,
     gap_range=(3.0, 4.0),
     overload="b0",
     silent=("b7",),
+    drift_range=(30.0, 300.0),
     seed=5,
 )
 

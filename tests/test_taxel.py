@@ -306,7 +306,7 @@ def pad_model():
 
 @pytest.fixture(scope="module")
 def sphere_model():
-    return _make_sensor("sphere8")
+    return _make_sensor("sphere8-cones")
 
 
 def _pad_surface(model, probe, x, y, depth):

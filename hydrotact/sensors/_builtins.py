@@ -13,7 +13,7 @@ from importlib.resources import files
 
 from .._files import write_text_atomic
 
-BUILTIN_SENSORS = ("pad5x5", "sphere8", "ellipsoid8")
+BUILTIN_SENSORS = ("pad5x5", "sphere8", "ellipsoid8", "sphere8-cones", "ellipsoid8-cones")
 _DATA = files("hydrotact.sensors") / "data"
 _NUMBERS = re.compile(r"\[\s*(-?[0-9][-0-9.e+]*(?:,\s*-?[0-9][-0-9.e+]*)*)\s*\]")
 
@@ -28,13 +28,13 @@ def _tilted_axis(tilt_deg: float, azimuth_deg: float) -> list[float]:
     return [_round(math.sin(t) * math.cos(az)), _round(math.sin(t) * math.sin(az)), _round(math.cos(t))]
 
 
-def _ring(names, azimuths, rx, ry, z, tilt_deg, half_angle_deg):
+def _ring(names, azimuths, rx, ry, z, tilt_deg, field):
     return [
         {
             "name": name,
             "position": [_round(rx * math.cos(math.radians(az))), _round(ry * math.sin(math.radians(az))), z],
             "axis": _tilted_axis(tilt_deg, az),
-            "receptive_field": {"kind": "cone", "half_angle": half_angle_deg},
+            "receptive_field": dict(field),
         }
         for name, az in zip(names, azimuths, strict=True)
     ]
@@ -69,19 +69,27 @@ def _pad5x5() -> dict:
     }
 
 
-def _curved(name, shape_text, inner, outer, centre_z, theta_range, phi_range, ranges_text) -> dict:
+def _curved(name, shape_text, inner, outer, centre_z, theta_range, phi_range, ranges_text, cones=False) -> dict:
+    field = {"kind": "cone", "half_angle": 40.0} if cones else {"kind": "elastic"}
     taxels = [
-        {
-            "name": "b0",
-            "position": [0.0, 0.0, inner[2]],
-            "axis": [0.0, 0.0, 1.0],
-            "receptive_field": {"kind": "cone", "half_angle": 40.0},
-        },
-        *_ring(["b1", "b2", "b3", "b4"], [0, 90, 180, 270], inner[0], inner[1], inner[2], 30.0, 40.0),
-        *_ring(["b5", "b6", "b7"], [60, 180, 300], outer[0], outer[1], outer[2], 60.0, 40.0),
+        {"name": "b0", "position": [0.0, 0.0, inner[2]], "axis": [0.0, 0.0, 1.0], "receptive_field": dict(field)},
+        *_ring(["b1", "b2", "b3", "b4"], [0, 90, 180, 270], inner[0], inner[1], inner[2], 30.0, field),
+        *_ring(["b5", "b6", "b7"], [60, 180, 300], outer[0], outer[1], outer[2], 60.0, field),
     ]
+    if cones:
+        reading = (
+            "every receptive field a cone of half-angle 40 deg (also our choice): the barometer sees the "
+            f"contact pressure on the skin inside it. A heuristic kept beside {name} (which reads the "
+            "elastomer's stress) to compare with and for fast runs; no sensor has confirmed it."
+        )
+    else:
+        reading = (
+            "every barometer reads the elastomer's hydrostatic pressure averaged over a 0.5 mm port "
+            "(the elastic receptive field, nu 0.49; its fields ship with hydrotact). "
+            f"{name}-cones is the same layout under the earlier 40 deg cones."
+        )
     return {
-        "name": name,
+        "name": name + ("-cones" if cones else ""),
         "description": (
             f"The {shape_text} of the barometric estimation paper with 8 BMP388 barometers. The elastomer "
             f"(hydrotact.mesh seed {name}) and the contact-angle convention and ranges ({ranges_text}) are "
@@ -89,7 +97,7 @@ def _curved(name, shape_text, inner, outer, centre_z, theta_range, phi_range, ra
             f"our choice: b0 on the axis at z = {inner[2]:g} mm sensing along +z; b1..b4 on an inner ring "
             "at azimuths 0, 90, 180, 270 deg, axes tilted 30 deg outward from +z; b5..b7 on an outer ring at "
             f"z = {outer[2]:g} mm (on angled risers) at azimuths 60, 180, 300 deg, axes tilted 60 deg "
-            "outward; every receptive field a cone of half-angle 40 deg (also our choice)."
+            "outward; " + reading
         ),
         "units": {"length": "mm", "angle": "deg"},
         "geometry": {"kind": "seed", "seed": name},
@@ -101,10 +109,17 @@ def _curved(name, shape_text, inner, outer, centre_z, theta_range, phi_range, ra
 
 def builtin_documents() -> dict[str, dict]:
     """The JSON documents of the built-in sensors, by name."""
+    documents = {"pad5x5": _pad5x5()}
+    for cones in (False, True):
+        for document in _curved_documents(cones):
+            documents[document["name"]] = document
+    return documents
+
+
+def _curved_documents(cones: bool) -> list[dict]:
     a, b = 10.7, 9.0
-    return {
-        "pad5x5": _pad5x5(),
-        "sphere8": _curved(
+    return [
+        _curved(
             "sphere8",
             "three-quarter silicone sphere (R = 10 mm, centre 5 mm above the PCB)",
             (3.0, 3.0, 1.0),
@@ -113,8 +128,9 @@ def builtin_documents() -> dict[str, dict]:
             [-45.0, 45.0],
             [-135.0, 45.0],
             "theta in [-45, 45] deg, phi in [-135, 45] deg, measured from the sphere's centre",
+            cones,
         ),
-        "ellipsoid8": _curved(
+        _curved(
             "ellipsoid8",
             "silicone ellipsoid (a, b, c = 10.7, 9, 6.8 mm, centre 3.4 mm above the PCB)",
             (_round(0.33 * a), _round(0.33 * b), 0.8),
@@ -123,8 +139,9 @@ def builtin_documents() -> dict[str, dict]:
             [-40.0, 40.0],
             [-72.0, 72.0],
             "theta within +-40 deg, phi within +-72 deg, measured from the ellipsoid's centre",
+            cones,
         ),
-    }
+    ]
 
 
 def builtin_text(name: str) -> str:
