@@ -9,10 +9,14 @@ jax.config.update("jax_numpy_rank_promotion", "raise")
 
 @pytest.fixture(autouse=True, scope="session")
 def _private_cache(tmp_path_factory):
-    """Keep the mesh cache of the test run out of the user's home."""
+    """Keep the cache of meshes and elastic fields out of the user's home: one per
+    session, or the one `make test` shares across its test files
+    ($HYDROTACT_TEST_CACHE_DIR, made anew each run; its entries are written atomically).
+    Tests that must see a cold cache set their own."""
     import os
 
-    os.environ["HYDROTACT_CACHE_DIR"] = str(tmp_path_factory.mktemp("cache"))
+    shared = os.environ.get("HYDROTACT_TEST_CACHE_DIR")
+    os.environ["HYDROTACT_CACHE_DIR"] = shared or str(tmp_path_factory.mktemp("cache"))
     yield
 
 

@@ -36,6 +36,20 @@ from hydrotact.mesh import FREE, make_ball, make_box, make_seed_mesh
 
 E = 1e5
 
+# The brute-force and tie checks call the kernels directly, not through the jitted
+# compute_contact_surface: run eagerly, a first call dispatches every op of the clipping
+# one by one (the tie test took 51 s so, 14.5 s jitted). The gradient checks stay eager:
+# there reverse mode jitted compiled longer than it ran (62 s eager, 125 s jitted).
+_soft_rigid = eqx.filter_jit(calc_soft_rigid_surface)
+_half_space = eqx.filter_jit(calc_half_space_surface)
+_soft_soft = eqx.filter_jit(calc_soft_soft_surface)
+
+
+@eqx.filter_jit
+def _batched(kernel, field, other, poses, **options):
+    """kernel(field, other, X, **options) for each pose, in one jitted program."""
+    return jax.vmap(lambda X: kernel(field, other, X, **options))(poses)
+
 
 def _ball_field(radius, num_layers, modulus=E):
     """A soft ball with the field p = E (1 - r / R) set at its vertices."""
@@ -85,7 +99,7 @@ def test_uniform_pressure_force_is_pressure_times_projected_area():
     angle = 0.1
     probe = make_box_probe((10e-3, 10e-3, 3e-3))
     X_SR = make_pose([0.0, 0.0, z0], [angle, 0.0, 0.0])
-    tilted, _ = compute_contact_surface(field, probe, X_SR)
+    tilted, _ = compute_contact_surface(field, probe, X_SR, Capacity(tets=1152))  # what it needs: from the default it grew twice
     normal = -np.asarray(X_SR.rotation)[:, 2]
     expected = E * (1 - z0 / height) * size * size / np.cos(angle) * normal
     np.testing.assert_allclose(np.asarray(tilted.calc_force()), expected * np.cos(angle) / np.cos(angle), rtol=1e-9, atol=1e-9 * np.linalg.norm(expected))
@@ -121,9 +135,9 @@ def test_broad_phase_matches_brute_force_soft_rigid():
     clusters = make_tet_clusters(field.vertices, field.tets, cluster_size=16)
     for xyz in ([0.3e-3, -0.2e-3, 3.6e-3], [6.3e-3, 0.0, 3.5e-3], [0.0, 0.0, 5e-3]):
         X = make_pose(xyz, [0.05, 0.1, 0.2])
-        brute = calc_soft_rigid_surface(field, probe, X, brute_force=True)
-        _assert_same_surface(calc_soft_rigid_surface(field, probe, X, Capacity(1024, 256, 8192)), brute)
-        _assert_same_surface(calc_soft_rigid_surface(field, probe, X, Capacity(1024, 256, 8192), clusters=clusters), brute)
+        brute = _soft_rigid(field, probe, X, brute_force=True)
+        _assert_same_surface(_soft_rigid(field, probe, X, Capacity(1024, 256, 8192)), brute)
+        _assert_same_surface(_soft_rigid(field, probe, X, Capacity(1024, 256, 8192), clusters=clusters), brute)
 
 
 def test_broad_phase_at_the_first_cluster_counts_its_tets_once():
@@ -138,9 +152,9 @@ def test_broad_phase_at_the_first_cluster_counts_its_tets_once():
     X = make_pose([-6.2e-3, -6.2e-3, 0.3e-3])  # the cylinder cuts the pad's corner edge at its base
     first = np.asarray(field.vertices)[np.asarray(field.tets)[np.asarray(clusters.members)[0]]].reshape(-1, 3)
     assert np.all(first.min(axis=0) < np.array([-4.2e-3, -4.2e-3, 3.3e-3]))  # cluster 0 lies in the probe's box
-    brute = calc_soft_rigid_surface(field, probe, X, brute_force=True)
+    brute = _soft_rigid(field, probe, X, brute_force=True)
     assert float(brute.total_area) > 0.0
-    culled = calc_soft_rigid_surface(field, probe, X, Capacity(1024, 256, 8192), clusters=clusters)
+    culled = _soft_rigid(field, probe, X, Capacity(1024, 256, 8192), clusters=clusters)
     assert int(culled.needed[0]) < field.tets.shape[0]
     _assert_same_surface(culled, brute)
 
@@ -148,13 +162,13 @@ def test_broad_phase_at_the_first_cluster_counts_its_tets_once():
 def test_broad_phase_matches_brute_force_half_space_and_soft_soft():
     mesh, field = _ball_field(5e-3, 2)
     X = make_pose([0.2e-3, 0.0, 3.9e-3], [0.2, 0.0, 0.0])
-    brute = calc_half_space_surface(field, X, brute_force=True)
-    _assert_same_surface(calc_half_space_surface(field, X), brute)
+    brute = _half_space(field, X, brute_force=True)
+    _assert_same_surface(_half_space(field, X), brute)
     clusters = make_tet_clusters(field.vertices, field.tets, cluster_size=16)
-    _assert_same_surface(calc_half_space_surface(field, X, Capacity(512, 0, 0, 1024), clusters=clusters), brute)
+    _assert_same_surface(_half_space(field, X, Capacity(512, 0, 0, 1024), clusters=clusters), brute)
     X_SB = make_pose([1e-3, 0.5e-3, 9e-3], [0.3, 0.1, 0.0])
-    culled = calc_soft_soft_surface(field, field, X_SB, Capacity(512, 512, 0, 4096))
-    brute = calc_soft_soft_surface(field, field, X_SB, brute_force=True)
+    culled = _soft_soft(field, field, X_SB, Capacity(512, 512, 0, 4096))
+    brute = _soft_soft(field, field, X_SB, brute_force=True)
     _assert_same_surface(culled, brute)
     assert int(culled.num_polygons) > 10
 
@@ -167,21 +181,21 @@ def test_overflow_is_detected_and_retried():
     # overlap), then, once those fit, the polygons (the pairs the plane tests keep).
     # The second call runs at the capacity the retry loop grows to next, so the loop
     # below compiles one new capacity, not three.
-    small = calc_soft_rigid_surface(field, probe, X, first := Capacity(64, 64, 128, 128))
+    small = _soft_rigid(field, probe, X, first := Capacity(64, 64, 128, 128))
     assert bool(small.did_overflow) and int(small.needed[2]) > 128
     grown = first.grown_to(small.needed)
     assert grown.pairs >= int(small.needed[2]) and grown.polygons == 128
-    small = calc_soft_rigid_surface(field, probe, X, grown)
+    small = _soft_rigid(field, probe, X, grown)
     assert bool(small.did_overflow) and int(small.needed[3]) > 128 and int(small.needed[2]) <= grown.pairs
     surface, capacity = compute_contact_surface(field, probe, X, first)
     assert not bool(surface.did_overflow) and capacity.pairs > 128 and capacity.polygons > 128
     # The half-space's two buffers (tets by cluster, then polygons) grow as well.
     X_half = make_pose([0.0, 0.0, 3.5e-3])
-    small = calc_half_space_surface(field, X_half, Capacity(64, 0, 0, 64), clusters=make_tet_clusters(field.vertices, field.tets))
+    small = _half_space(field, X_half, Capacity(64, 0, 0, 64), clusters=make_tet_clusters(field.vertices, field.tets))
     assert bool(small.did_overflow) and int(small.needed[0]) > 64
     half_space, half_capacity = compute_contact_surface(field, HalfSpace(), X_half, Capacity(64, 0, 0, 64))
     assert not bool(half_space.did_overflow) and half_capacity.tets > 64 and half_capacity.polygons > 64
-    assert int(half_space.num_polygons) == int(calc_half_space_surface(field, X_half, brute_force=True).num_polygons)
+    assert int(half_space.num_polygons) == int(_half_space(field, X_half, brute_force=True).num_polygons)
     reference, _ = compute_contact_surface(field, probe, X)
     np.testing.assert_allclose(np.asarray(surface.calc_force()), np.asarray(reference.calc_force()), rtol=1e-12, atol=1e-15)
 
@@ -200,7 +214,7 @@ def test_batched_trajectory_matches_single_poses():
     probe = make_cylinder_probe(2e-3)
     xs = np.linspace(-4.4e-3, 4.4e-3, 9)
     poses = jax.vmap(lambda x: make_pose(jnp.array([x, 0.0, 3.6e-3])))(jnp.asarray(xs))
-    batch, capacity = compute_contact_surface(field, probe, poses)
+    batch, capacity = compute_contact_surface(field, probe, poses, Capacity(polygons=1408))  # what it needs (one compilation)
     assert batch.calc_force().shape == (9, 3)
     for k in (0, 4, 8):
         single, _ = compute_contact_surface(field, probe, make_pose([xs[k], 0.0, 3.6e-3]), capacity)
@@ -414,16 +428,20 @@ PAD_LAYERS = np.arange(1, 8) * 0.5e-3  # pad5x5's inner vertex layers, as depths
 
 
 def _tie_probes():
-    """(label, probe, rotation vector) for the tie sweeps: the half-space, the upright
-    and tilted 2 mm cylinder, a box whose bottom and side faces lie on the pad's
-    vertex planes (x and y every 0.55 mm) when centred, and a box pressed edge first."""
+    """(label, probe, rotation vector, capacity) for the tie sweeps: the half-space, the
+    upright and tilted 2 mm cylinder, a box whose bottom and side faces lie on the pad's
+    vertex planes (x and y every 0.55 mm) when centred, and a box pressed edge first.
+
+    The capacities hold each sweep (measured): from the default ones the sweep grew
+    its buffers three or four times, each a compilation of 10-25 s, which the overflow
+    tests already cover. Were the mesh to change, a sweep would grow them again."""
     tilt = np.array([np.deg2rad(15.0), np.deg2rad(10.0), 0.0])
     return [
-        ("half-space", HalfSpace(), np.zeros(3)),
-        ("upright cylinder", make_cylinder_probe(2e-3), np.zeros(3)),
-        ("tilted cylinder", make_cylinder_probe(2e-3), tilt),
-        ("box on the vertex planes", make_box_probe((2.2e-3, 2.2e-3, 2e-3)), np.zeros(3)),
-        ("edge-first box", make_box_probe((3e-3, 3e-3, 2e-3)), np.array([np.pi / 4, 0.0, 0.0])),
+        ("half-space", HalfSpace(), np.zeros(3), Capacity(7680, 8, 8, 7168)),
+        ("upright cylinder", make_cylinder_probe(2e-3), np.zeros(3), Capacity(384, 256, 9216, 4096)),
+        ("tilted cylinder", make_cylinder_probe(2e-3), tilt, Capacity(640, 256, 7680, 2816)),
+        ("box on the vertex planes", make_box_probe((2.2e-3, 2.2e-3, 2e-3)), np.zeros(3), Capacity(640, 40, 4096, 2048)),
+        ("edge-first box", make_box_probe((3e-3, 3e-3, 2e-3)), np.array([np.pi / 4, 0.0, 0.0]), Capacity(1024, 32, 4096, 1024)),
     ]
 
 
@@ -449,7 +467,7 @@ def pad_field():
     return mesh, field, make_tet_clusters(field.vertices, field.tets)
 
 
-@pytest.mark.parametrize("case", range(4), ids=[label for label, _, _ in _tie_probes()[:4]])
+@pytest.mark.parametrize("case", range(4), ids=[label for label, *_ in _tie_probes()[:4]])
 def test_contact_is_continuous_through_every_vertex_layer(pad_field, case):
     """Depth sweeps through each inner vertex layer of pad5x5 (every 0.5 mm): the
     force and area change across the layer by no more than in the steps beside it;
@@ -457,14 +475,14 @@ def test_contact_is_continuous_through_every_vertex_layer(pad_field, case):
     upright cylinder's tip, the box's bottom and sides), the value there is the mean of
     the poses 1 nm to either side, to 1e-6 (before the tie rule: twice that)."""
     _, field, clusters = pad_field
-    label, probe, rotation = _tie_probes()[case]
+    label, probe, rotation, capacity = _tie_probes()[case]
     # Rigid meshes follow Drake's 5 pi / 8 rule, which drops the tip's polygons past
     # the pressure ridge at the pad's mid-plane (2 mm): their sweeps stop above it.
     layers = PAD_LAYERS if isinstance(probe, HalfSpace) else PAD_LAYERS[PAD_LAYERS < 2e-3]
     step = 2e-6
     offsets = np.array([-2 * step, -step, -1e-9, 0.0, 1e-9, step, 2 * step])
     depths = (layers[:, None] + offsets[None]).reshape(-1)
-    surfaces, _ = compute_contact_surface(field, probe, _poses_at_depths(probe, rotation, depths), clusters=clusters)
+    surfaces, _ = compute_contact_surface(field, probe, _poses_at_depths(probe, rotation, depths), capacity, clusters)
     force = np.asarray(jax.vmap(lambda s: s.calc_force())(surfaces))
     normal_force = -force[:, 2].reshape(len(layers), -1)
     area = np.asarray(surfaces.total_area).reshape(len(layers), -1)
@@ -487,8 +505,9 @@ def test_ties_match_brute_force():
     clusters = make_tet_clusters(field.vertices, field.tets, cluster_size=16)
     depths = [1e-3, 2e-3, 2.47e-3, 3e-3]
     poses = _poses_at_depths(HalfSpace(), np.zeros(3), depths)
-    brute = jax.vmap(lambda X: calc_half_space_surface(field, X, brute_force=True))(poses)
-    culled = jax.vmap(lambda X: calc_half_space_surface(field, X, Capacity(4096, 0, 0, 4096), clusters=clusters))(poses)
+    half_space = functools.partial(_batched, lambda field, _, X, **options: calc_half_space_surface(field, X, **options))
+    brute = half_space(field, None, poses, brute_force=True)
+    culled = half_space(field, None, poses, capacity=Capacity(4096, 0, 0, 4096), clusters=clusters)
     probes = [
         (make_box_probe((2e-3, 2e-3, 2e-3)), np.zeros(3)),
         (make_box_probe((3e-3, 3e-3, 2e-3)), np.array([np.pi / 4, 0.0, 0.0])),
@@ -496,8 +515,8 @@ def test_ties_match_brute_force():
     pairs = [(culled, brute)]
     for probe, rotation in probes:
         poses = _poses_at_depths(probe, rotation, depths[:2])
-        brute = jax.vmap(lambda X, probe=probe: calc_soft_rigid_surface(field, probe, X, brute_force=True))(poses)
-        culled = jax.vmap(lambda X, probe=probe: calc_soft_rigid_surface(field, probe, X, Capacity(1024, 256, 16384, 4096), clusters=clusters))(poses)
+        brute = _batched(calc_soft_rigid_surface, field, probe, poses, brute_force=True)
+        culled = _batched(calc_soft_rigid_surface, field, probe, poses, capacity=Capacity(1024, 256, 16384, 4096), clusters=clusters)
         pairs.append((culled, brute))
     for culled, brute in pairs:
         for k in range(culled.counts.shape[0]):
@@ -511,10 +530,10 @@ def test_gradients_at_and_beside_ties(pad_field):
     either side of it, equals one of the one-sided derivatives on the half-space's tie
     (zero-area sections count), and equals central differences away from the layers."""
     _, field, clusters = pad_field
-    for label, probe, rotation in (_tie_probes()[0], _tie_probes()[3]):
+    for label, probe, rotation, capacity in (_tie_probes()[0], _tie_probes()[3]):
         depths = [1e-3 - 1e-9, 1e-3, 1e-3 + 1e-9, 0.73e-3, 0.73e-3 - 1e-8, 0.73e-3 + 1e-8]
         poses = _poses_at_depths(probe, rotation, depths)
-        _, capacity = compute_contact_surface(field, probe, poses, clusters=clusters)
+        _, capacity = compute_contact_surface(field, probe, poses, capacity, clusters)
 
         def normal_force(X, probe=probe, capacity=capacity):
             return -calc_contact_surface(field, probe, X, capacity, clusters).calc_force()[2]
@@ -523,7 +542,7 @@ def test_gradients_at_and_beside_ties(pad_field):
         def deeper(X):
             return eqx.tree_at(lambda p: p.translation, jax.tree.map(jnp.zeros_like, X), jnp.array([0.0, 0.0, -1.0]))
 
-        values, tangents = jax.vmap(lambda X: jax.jvp(normal_force, (X,), (deeper(X),)))(poses)
+        values, tangents = jax.jit(jax.vmap(lambda X: jax.jvp(normal_force, (X,), (deeper(X),))))(poses)
         values, tangents = np.asarray(values), np.asarray(tangents)
         assert np.all(np.isfinite(tangents)) and np.all(tangents > 0), (label, tangents)
         # On the layer the force has a kink (the field's gradient jumps there). For the

@@ -2,6 +2,9 @@
 receptive fields by reciprocity, checked against closed forms (Boussinesq, Cerruti,
 Hertz), scikit-fem's mixed assembly on the same mesh, and central differences."""
 
+import functools
+
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -362,6 +365,9 @@ def test_readings_gradients_match_central_differences(pad):
     capacity = _capacity()
     translation = np.asarray(X_SR.translation)
 
+    # Jitted: run eagerly, each of the twelve differences traced and compiled the
+    # solver's loop anew.
+    @functools.partial(jax.jit, static_argnums=4)
     def reading(translation, nu, position, axis, channel):
         moved = eqx_tree_at_ports(ports, position, axis, channel)
         fields = elastic.calc_receptive_fields(problem, moved, poisson_ratio=nu, rtol=1e-12)
@@ -434,7 +440,7 @@ def _pad_document(kinds):
     return document
 
 
-def test_elastic_barometers_in_the_forward_model(tmp_path):
+def test_elastic_barometers_in_the_forward_model(tmp_path, monkeypatch):
     """A sensor file with elastic barometers: read back equal, simulated through the
     one forward model. A press at the pad's centre moves every elastic channel (the
     stress spreads through the rubber; a disk under the same press sees nothing past
@@ -446,6 +452,7 @@ def test_elastic_barometers_in_the_forward_model(tmp_path):
     from hydrotact.sim import make_sensor_model, make_trajectory, simulate
     from hydrotact.visco import make_prony
 
+    monkeypatch.setenv("HYDROTACT_CACHE_DIR", str(tmp_path / "cache"))  # the fields are solved here first
     kinds = ["elastic" if k % 2 == 0 else "disk" for k in range(25)]
     spec = load_sensor(_pad_document(kinds))
     assert spec.poisson_ratio == 0.48 and spec.is_elastic.sum() == 13
@@ -571,8 +578,9 @@ def test_multigrid_preconditioner_gives_the_same_solution_and_gradients_in_fewer
         solution = elastic.solve_elasticity(problem, loads, poisson_ratio=nu, multigrid=multigrid, rtol=1e-12)
         return elastic.calc_port_readings(problem, solution.displacements, ports, poisson_ratio=nu)[0], solution.num_steps
 
-    (value, steps), grads = jax.value_and_grad(reading, argnums=(0, 1), has_aux=True)(jnp.asarray(0.49), jnp.asarray(1.0), multigrid)
-    (plain, plain_steps), plain_grads = jax.value_and_grad(reading, argnums=(0, 1), has_aux=True)(jnp.asarray(0.49), jnp.asarray(1.0), None)
+    value_and_grad = eqx.filter_jit(jax.value_and_grad(reading, argnums=(0, 1), has_aux=True))
+    (value, steps), grads = value_and_grad(jnp.asarray(0.49), jnp.asarray(1.0), multigrid)
+    (plain, plain_steps), plain_grads = value_and_grad(jnp.asarray(0.49), jnp.asarray(1.0), None)
     assert int(steps) * 4 < int(plain_steps), (int(steps), int(plain_steps))
     np.testing.assert_allclose(float(value), float(plain), rtol=1e-9)
     np.testing.assert_allclose(np.asarray(grads), np.asarray(plain_grads), rtol=1e-7)
