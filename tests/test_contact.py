@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import trimesh
+from helpers import count_compilations
 
 from hydrotact import HydrotactError
 from hydrotact.contact import (
@@ -174,29 +175,40 @@ def test_broad_phase_matches_brute_force_half_space_and_soft_soft():
 
 
 def test_overflow_is_detected_and_retried():
+    from hydrotact.contact._api import _single  # the jitted kernel the retry loop runs
+
     field = make_pressure_field(mesh := make_seed_mesh("pad5x5", 1.1e-3), calc_distance_field(mesh), E)
+    clusters = make_tet_clusters(field.vertices, field.tets)
     probe = make_cylinder_probe(2e-3, num_sides=16)
     X = make_pose([0.0, 0.0, 3.5e-3])
-    # Each soft-rigid buffer reports its own overflow: the candidate pairs (boxes
-    # overlap), then, once those fit, the polygons (the pairs the plane tests keep).
-    # The second call runs at the capacity the retry loop grows to next, so the loop
-    # below compiles one new capacity, not three.
-    small = _soft_rigid(field, probe, X, first := Capacity(64, 64, 128, 128))
-    assert bool(small.did_overflow) and int(small.needed[2]) > 128
-    grown = first.grown_to(small.needed)
-    assert grown.pairs >= int(small.needed[2]) and grown.polygons == 128
-    small = _soft_rigid(field, probe, X, grown)
-    assert bool(small.did_overflow) and int(small.needed[3]) > 128 and int(small.needed[2]) <= grown.pairs
-    surface, capacity = compute_contact_surface(field, probe, X, first)
-    assert not bool(surface.did_overflow) and capacity.pairs > 128 and capacity.polygons > 128
+    # Each buffer reports its own overflow, in the order the kernel fills them: the
+    # tets near the probe, then the candidate pairs (boxes overlap) among the tets
+    # that fitted, then the polygons (the pairs the plane tests keep) among the pairs
+    # that fitted. Growing to what each overflow reports climbs through every buffer.
+    # The steps here run the program the retry loop runs (the same kernel, clusters and
+    # capacities), so the loop below compiles nothing new.
+    capacity, overflowed = (first := Capacity(64, 64, 128, 128)), []
+    while bool((step := _single(field, probe, X, capacity, clusters)).did_overflow):
+        over = [k for k, (size, need) in enumerate(zip(capacity.sizes, np.asarray(step.needed).tolist())) if need > size]
+        assert over, (capacity, step.needed)  # an overflow names the buffer it outgrew
+        overflowed.append(over)
+        capacity = capacity.grown_to(step.needed)
+        assert all(capacity.sizes[k] >= int(step.needed[k]) for k in over)
+    assert {k for over in overflowed for k in over} == {0, 2, 3} and len(overflowed) >= 3, overflowed  # tets, pairs, polygons
+    with count_compilations() as compilations:
+        surface, grown = compute_contact_surface(field, probe, X, first, clusters)
+    assert not bool(surface.did_overflow) and grown.sizes == capacity.fitted_to(step.needed).sizes
+    assert not compilations, compilations
     # The half-space's two buffers (tets by cluster, then polygons) grow as well.
     X_half = make_pose([0.0, 0.0, 3.5e-3])
-    small = _half_space(field, X_half, Capacity(64, 0, 0, 64), clusters=make_tet_clusters(field.vertices, field.tets))
+    small = _single(field, HalfSpace(), X_half, Capacity(64, 0, 0, 64), clusters)
     assert bool(small.did_overflow) and int(small.needed[0]) > 64
-    half_space, half_capacity = compute_contact_surface(field, HalfSpace(), X_half, Capacity(64, 0, 0, 64))
+    half_space, half_capacity = compute_contact_surface(field, HalfSpace(), X_half, Capacity(64, 0, 0, 64), clusters)
     assert not bool(half_space.did_overflow) and half_capacity.tets > 64 and half_capacity.polygons > 64
     assert int(half_space.num_polygons) == int(_half_space(field, X_half, brute_force=True).num_polygons)
-    reference, _ = compute_contact_surface(field, probe, X)
+    # Against buffers that hold the press from the start (no cluster search).
+    reference = _soft_rigid(field, probe, X, Capacity(2048, 512, 16384, 4096))
+    assert not bool(reference.did_overflow)
     np.testing.assert_allclose(np.asarray(surface.calc_force()), np.asarray(reference.calc_force()), rtol=1e-12, atol=1e-15)
 
 
