@@ -47,9 +47,9 @@ _soft_soft = eqx.filter_jit(calc_soft_soft_surface)
 
 
 @eqx.filter_jit
-def _batched(kernel, field, other, poses, **options):
-    """kernel(field, other, X, **options) for each pose, in one jitted program."""
-    return jax.vmap(lambda X: kernel(field, other, X, **options))(poses)
+def _batched(kernel, bodies, poses, **options):
+    """kernel(*bodies, X, **options) for each pose X, in one jitted program."""
+    return jax.vmap(lambda X: kernel(*bodies, X, **options))(poses)
 
 
 def _ball_field(radius, num_layers, modulus=E):
@@ -517,9 +517,8 @@ def test_ties_match_brute_force():
     clusters = make_tet_clusters(field.vertices, field.tets, cluster_size=16)
     depths = [1e-3, 2e-3, 2.47e-3, 3e-3]
     poses = _poses_at_depths(HalfSpace(), np.zeros(3), depths)
-    half_space = functools.partial(_batched, lambda field, _, X, **options: calc_half_space_surface(field, X, **options))
-    brute = half_space(field, None, poses, brute_force=True)
-    culled = half_space(field, None, poses, capacity=Capacity(4096, 0, 0, 4096), clusters=clusters)
+    brute = _batched(calc_half_space_surface, (field,), poses, brute_force=True)
+    culled = _batched(calc_half_space_surface, (field,), poses, capacity=Capacity(4096, 0, 0, 4096), clusters=clusters)
     probes = [
         (make_box_probe((2e-3, 2e-3, 2e-3)), np.zeros(3)),
         (make_box_probe((3e-3, 3e-3, 2e-3)), np.array([np.pi / 4, 0.0, 0.0])),
@@ -527,8 +526,8 @@ def test_ties_match_brute_force():
     pairs = [(culled, brute)]
     for probe, rotation in probes:
         poses = _poses_at_depths(probe, rotation, depths[:2])
-        brute = _batched(calc_soft_rigid_surface, field, probe, poses, brute_force=True)
-        culled = _batched(calc_soft_rigid_surface, field, probe, poses, capacity=Capacity(1024, 256, 16384, 4096), clusters=clusters)
+        brute = _batched(calc_soft_rigid_surface, (field, probe), poses, brute_force=True)
+        culled = _batched(calc_soft_rigid_surface, (field, probe), poses, capacity=Capacity(1024, 256, 16384, 4096), clusters=clusters)
         pairs.append((culled, brute))
     for culled, brute in pairs:
         for k in range(culled.counts.shape[0]):
