@@ -22,10 +22,18 @@ Outputs (in --output, default experiments/results/):
   reference (as a share of the cell's peak), plus the settings and timings;
 - `probe_sweep_pad5x5.npz`: the raw traces.
 
+`--barometers elastic` runs the same sweeps with every barometer reading the
+elastomer's pressure at its port (`{"kind": "elastic"}`: 0.5 mm ports, nu 0.49; the
+first run solves pad5x5's 25 receptive fields, minutes, then reads them from the
+cache) instead of the paper's ray-cast disks; its outputs are named
+`probe_sweep_pad5x5_elastic.*`, there is no ray reference (an elastic reading has no
+rays), and when the disk run's `probe_sweep_pad5x5.npz` is in --output it also draws
+`probe_sweep_pad5x5_models.png`, the two models' curves over each other.
+
 Each sweep and its reference run in chunks; finished chunks are kept in hidden
 `.probe_sweep_pad5x5.*.partial.npz` files, so an interrupted run resumes. `--smoke` runs a few coarse positions (for the tests).
 
-Run: `.venv/bin/python experiments/probe_sweep_pad5x5.py [--rays 64] [--reference-rays 1024] [--smoke]`.
+Run: `.venv/bin/python experiments/probe_sweep_pad5x5.py [--barometers disk|elastic] [--rays 64] [--reference-rays 1024] [--smoke]`.
 """
 
 import argparse
@@ -46,6 +54,7 @@ import optimistix as optx  # noqa: E402
 
 from hydrotact._files import atomic_path, digest, write_text_atomic  # noqa: E402
 from hydrotact.contact import calc_contact_surface, compute_contact_surface, make_cylinder_probe, make_pose  # noqa: E402
+from hydrotact.sensors import load_sensor  # noqa: E402
 from hydrotact.sim import SimCapacity, calc_unit_response, make_sensor_model  # noqa: E402
 from hydrotact.taxel import TaxelCapacity  # noqa: E402
 
@@ -64,6 +73,18 @@ SWEEPS = {
     "x axis": {"cells": {"b21": _cell(2, 1), "b22": _cell(2, 2), "b23": _cell(2, 3)}, "direction": np.array([1.0, 0.0])},
     "diagonal": {"cells": {"b11": _cell(1, 1), "b22": _cell(2, 2), "b33": _cell(3, 3)}, "direction": np.array([1.0, 1.0]) / np.sqrt(2.0)},
 }
+
+
+def sensor(barometers: str):
+    """pad5x5 as built in (`disk`: the paper's ray-cast taxels), or with every barometer
+    `elastic` (the elastomer's pressure over a 0.5 mm port, nu 0.49), the layout the same."""
+    if barometers == "disk":
+        return load_sensor("pad5x5")
+    document = load_sensor("pad5x5").to_json()
+    document["name"] = "pad5x5-elastic"
+    for taxel in document["taxels"]:
+        taxel["receptive_field"] = {"kind": "elastic"}
+    return load_sensor(document, source="pad5x5 with elastic barometers")
 
 
 def sweep_positions(name: str, step: float, smoke: bool, every: int = 1):
@@ -133,7 +154,7 @@ def run_sweep(name, model, probe, capacity, modulus, step, smoke, chunk, partial
             done = {}
     num_done = len(done.get("depth", []))
     chunk = min(chunk, len(s))
-    label = f"{name} sweep, {model.num_rays} rays"
+    label = f"{name} sweep, " + (f"{model.num_rays} rays" if model.uses_rays else "elastic")
     with tqdm(total=len(s), initial=num_done, unit="position", desc=label, disable=not progress) as bar:
         for start in range(num_done, len(s), chunk):
             index = np.minimum(np.arange(start, start + chunk), len(s) - 1)
@@ -256,9 +277,39 @@ def plot(results, path, title, references=None):
     plt.close(figure)
 
 
+def plot_models(disk, elastic, path):
+    """The two barometer models' normalised curves of the three innermost cells along
+    each sweep, over each other (solid: elastic, dashed: ray-cast disks)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
+    for axis, sweep in zip(axes, SWEEPS):
+        for cell, index in SWEEPS[sweep]["cells"].items():
+            line = None
+            for result, style, label in ((elastic, "-", "elastic"), (disk, "--", "disk rays")):
+                curve = result[sweep]["taxels"][:, index]
+                kwargs = {"color": line.get_color()} if line is not None else {}
+                drawn = axis.plot(1e3 * result[sweep]["s"], curve / max(curve.max(), 1e-300), style, lw=1.2, label=f"{cell}, {label}", **kwargs)[0]
+                line = line or drawn
+        axis.set_title(f"{sweep} sweep")
+        axis.set_xlabel("probe position along the sweep [mm]")
+        axis.grid(alpha=0.3)
+        axis.legend(fontsize=7)
+    axes[0].set_ylabel("normalised response")
+    figure.suptitle(f"pad5x5, 2 mm cylinder at {TARGET_FORCE} N: elastic barometers (solid) against the ray-cast disks (dashed)")
+    figure.tight_layout()
+    with atomic_path(path) as tmp:
+        figure.savefig(tmp, dpi=130)
+    plt.close(figure)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--smoke", action="store_true", help="a few coarse positions and 16 rays (for the tests)")
+    parser.add_argument("--barometers", choices=("disk", "elastic"), default="disk", help="the barometer model: the paper's ray-cast disks (default) or the elastomer's pressure")
     parser.add_argument("--rays", type=int, default=64, help="rays per taxel (default 64, the library's)")
     parser.add_argument("--reference-rays", type=int, default=1024, help="rays per taxel of the converged reference (default 1024)")
     parser.add_argument("--reference-every", type=int, default=16, help="the reference at every this many positions (default 16)")
@@ -270,8 +321,10 @@ def main(argv=None):
     rays = 16 if args.smoke and args.rays == 64 else args.rays
     reference_rays = 64 if args.smoke and args.reference_rays == 1024 else args.reference_rays
     every = 2 if args.smoke and args.reference_every == 16 else args.reference_every
+    elastic = args.barometers == "elastic"
+    name = NAME + ("_elastic" if elastic else "")
     started = time.perf_counter()
-    model = make_sensor_model("pad5x5", num_rays=rays)
+    model = make_sensor_model(sensor(args.barometers), num_rays=rays)
     reference_model = dataclasses.replace(model, num_rays=reference_rays)  # the same field, more rays
     probe = make_cylinder_probe(2e-3)
     # Buffers that hold the deepest contact of the sweeps (found once, then fixed).
@@ -280,44 +333,56 @@ def main(argv=None):
     capacity = SimCapacity.of(contact_capacity, TaxelCapacity(1 << 13))
     args.output.mkdir(parents=True, exist_ok=True)
     results, references = {}, {"rays": reference_rays}
-    for name in SWEEPS:
-        for part, sweep_model, stride, store in (("sweep", model, 1, results), ("reference", reference_model, every, references)):
-            partial = args.output / f".{NAME}.{name.replace(' ', '_')}.{part}.partial.npz"
+    # An elastic reading has no rays, so no ray reference.
+    parts = (("sweep", model, 1, results),) + (() if elastic else (("reference", reference_model, every, references),))
+    for sweep in SWEEPS:
+        for part, sweep_model, stride, store in parts:
+            partial = args.output / f".{name}.{sweep.replace(' ', '_')}.{part}.partial.npz"
             # the reference at the depths already solved (the contact does not depend on the rays)
-            depths = None if part == "sweep" else results[name]["depth"][::stride]
-            s, xys, recorded = run_sweep(name, sweep_model, probe, capacity, args.modulus, args.step, args.smoke, args.chunk, partial, every=stride, depths=depths)
-            store[name] = {"s": s, "xy": xys, **recorded}
+            depths = None if part == "sweep" else results[sweep]["depth"][::stride]
+            s, xys, recorded = run_sweep(sweep, sweep_model, probe, capacity, args.modulus, args.step, args.smoke, args.chunk, partial, every=stride, depths=depths)
+            store[sweep] = {"s": s, "xy": xys, **recorded}
     report = {
         "experiment": "probe sweep over pad5x5 (hydroelastic tactile paper, Fig. 6 procedure)",
         "smoke": args.smoke,
+        "barometers": args.barometers,
         "probe": "cylinder:d=2mm",
         "target_force_N": TARGET_FORCE,
         "modulus_Pa": args.modulus,
-        "rays_per_taxel": rays,
-        "reference_rays_per_taxel": reference_rays,
-        "reference_every": every,
+        "rays_per_taxel": None if elastic else rays,
+        "reference_rays_per_taxel": None if elastic else reference_rays,
+        "reference_every": None if elastic else every,
         "step_mm": 1e3 * args.step,
         "seconds": time.perf_counter() - started,
         "sweeps": {},
     }
-    for name, result in results.items():
-        along = PITCH * (np.sqrt(2.0) if name == "diagonal" else 1.0)
-        report["sweeps"][name] = {
+    for sweep, result in results.items():
+        along = PITCH * (np.sqrt(2.0) if sweep == "diagonal" else 1.0)
+        reference = None if elastic else (references[sweep]["s"], references[sweep]["taxels"])
+        report["sweeps"][sweep] = {
             "num_positions": int(len(result["s"])),
             "all_converged": bool(np.all(result["converged"])),
             "max_force_error_N": float(np.max(np.abs(result["force"] - TARGET_FORCE))),
             "depth_mm": [1e3 * float(result["depth"].min()), 1e3 * float(result["depth"].max())],
-            "cells": cell_metrics(result["s"], result["taxels"], SWEEPS[name]["cells"], along, (references[name]["s"], references[name]["taxels"])),
+            "cells": cell_metrics(result["s"], result["taxels"], SWEEPS[sweep]["cells"], along, reference),
         }
-    stem = args.output / NAME
+    stem = args.output / name
     write_text_atomic(stem.with_suffix(".json"), json.dumps(report, indent=2) + "\n")
     with atomic_path(stem.with_suffix(".npz"), suffix=".npz") as tmp:
-        np.savez_compressed(tmp, **{f"{name.replace(' ', '_')}/{k}": v for name, r in results.items() for k, v in r.items()})
-    plot(results, stem.with_suffix(".png"), f"pad5x5, 2 mm cylinder at {TARGET_FORCE} N, {rays} rays per taxel", references)
-    for name in SWEEPS:
+        np.savez_compressed(tmp, **{f"{sweep.replace(' ', '_')}/{k}": v for sweep, r in results.items() for k, v in r.items()})
+    model_text = "elastic barometers (the elastomer's pressure, 0.5 mm ports)" if elastic else f"{rays} rays per taxel"
+    plot(results, stem.with_suffix(".png"), f"pad5x5, 2 mm cylinder at {TARGET_FORCE} N, {model_text}", None if elastic else references)
+    written = [stem.with_suffix(".json"), stem.with_suffix(".png"), stem.with_suffix(".npz")]
+    disk_traces = args.output / f"{NAME}.npz"
+    if elastic and disk_traces.is_file():
+        with np.load(disk_traces) as saved:
+            disk = {sweep: {k: saved[f"{sweep.replace(' ', '_')}/{k}"] for k in ("s", "taxels")} for sweep in SWEEPS}
+        plot_models(disk, results, args.output / f"{NAME}_models.png")
+        written.append(args.output / f"{NAME}_models.png")
+    for sweep in SWEEPS:
         for part in ("sweep", "reference"):
-            (args.output / f".{NAME}.{name.replace(' ', '_')}.{part}.partial.npz").unlink(missing_ok=True)
-    print(f"results: {stem.with_suffix('.json')}, {stem.with_suffix('.png')}, {stem.with_suffix('.npz')}")
+            (args.output / f".{name}.{sweep.replace(' ', '_')}.{part}.partial.npz").unlink(missing_ok=True)
+    print("results: " + ", ".join(map(str, written)))
     return report
 
 

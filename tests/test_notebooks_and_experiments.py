@@ -64,6 +64,19 @@ def test_probe_sweep_smoke(tmp_path, monkeypatch):
         assert 1.0 < centre["fwhm_mm"] < 4.0, (name, centre)
         # 16 rays against 64 at the positions both ran (footprint rays: 5 % of the peak at most)
         assert 0.0 < centre["max_difference_from_reference_of_peak"] < 0.08, (name, centre)
+    # --barometers elastic: the same layout, every barometer reading the elastomer (its
+    # fields take minutes to solve, so the full run alone uses them), and the figure that
+    # lays the two models' curves over each other.
+    monkeypatch.syspath_prepend(str(ROOT / "experiments"))
+    import probe_sweep_pad5x5 as sweep
+
+    disk, elastic = sweep.sensor("disk"), sweep.sensor("elastic")
+    assert not disk.is_elastic.any() and elastic.is_elastic.all() and elastic.name == "pad5x5-elastic"
+    np.testing.assert_array_equal(elastic.taxel_positions_S, disk.taxel_positions_S)
+    with np.load(tmp_path / "probe_sweep_pad5x5.npz") as saved:
+        traces = {name: {k: saved[f"{name.replace(' ', '_')}/{k}"] for k in ("s", "taxels")} for name in sweep.SWEEPS}
+    sweep.plot_models(traces, traces, tmp_path / "models.png")
+    assert (tmp_path / "models.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_ablation_table1_and_fine_tuning_curve_smoke(tmp_path, monkeypatch):
