@@ -105,42 +105,53 @@ def find_contact_heights(model, probe, sites_xy, iterations: int = 30) -> np.nda
 
     **Returns:** (S,) z in frame S, m.
     """
-    from ..contact import compute_contact_surface, make_pose
+    from ..contact import Capacity, make_pose
 
     sites_xy = np.asarray(sites_xy, dtype=np.float64)
     top = float(np.max(np.asarray(model.field.vertices)[:, 2]))
     bottom = float(np.min(np.asarray(model.field.vertices)[:, 2]))
     high = np.full(len(sites_xy), top + 1e-4)
     low = np.full(len(sites_xy), bottom + 0.25 * (top - bottom))
+    capacity = Capacity()
 
-    def poses(z):
-        return jax.vmap(make_pose)(jnp.asarray(np.column_stack([sites_xy, z])))
+    def touching(z):
+        # A polygon found is contact even when a buffer overflowed (the pieces that fit
+        # are real), so only a pose that overflowed and found none is in doubt: the
+        # buffers grow for those alone. The deep first poses touch at once in the
+        # default buffers, and the bisection near the skin fits in them: one
+        # compilation, where sizing the buffers to the deepest contact took five.
+        nonlocal capacity
+        X = jax.vmap(make_pose)(jnp.asarray(np.column_stack([sites_xy, z])))
+        while True:
+            hit, overflow, needed = (np.asarray(a) for a in _touching(model.field, probe, capacity, model.clusters, X))
+            doubt = overflow & ~hit
+            if not doubt.any():
+                return hit
+            capacity = capacity.grown_to(needed[doubt])
 
-    # The deepest poses size the buffers; every shallower one then fits in them.
-    surface, capacity = compute_contact_surface(model.field, probe, poses(low), clusters=model.clusters)
-    at_low = np.asarray(surface.total_area) > 0.0
-
-    def touching(X):
-        return np.asarray(_touching(model.field, probe, capacity, model.clusters, X))
-
-    at_high = touching(poses(high))
+    at_low, at_high = touching(low), touching(high)
     if not np.all(at_low) or np.any(at_high):
         bad = int(np.flatnonzero(~at_low | at_high)[0])
         raise HydrotactError(f"stage session: site {bad + 1} at ({1e3 * sites_xy[bad, 0]:g}, {1e3 * sites_xy[bad, 1]:g}) mm is not above the skin")
     for _ in range(iterations):
         middle = 0.5 * (low + high)
-        hit = touching(poses(middle))
+        hit = touching(middle)
         low, high = np.where(hit, middle, low), np.where(hit, high, middle)
     return 0.5 * (low + high)
 
 
 @eqx.filter_jit
 def _touching(field, probe, capacity, clusters, poses):
-    """Whether the probe touches the skin at each pose (compiled once per shapes and
-    capacity, not once per call of :func:`find_contact_heights`)."""
+    """Whether the probe touches the skin at each pose, whether a buffer overflowed,
+    and what each needed (compiled once per shapes and capacity, not once per call
+    of :func:`find_contact_heights`)."""
     from ..contact import calc_contact_surface, map_over_poses
 
-    return map_over_poses(lambda one: calc_contact_surface(field, probe, one, capacity, clusters).total_area > 0.0, poses)
+    def one(X):
+        surface = calc_contact_surface(field, probe, X, capacity, clusters)
+        return surface.total_area > 0.0, surface.did_overflow, surface.needed
+
+    return map_over_poses(one, poses)
 
 
 def _stage_plan(session: StageSession, onsets_travel: np.ndarray, rng, rate_hz: float):
