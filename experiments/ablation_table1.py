@@ -19,7 +19,9 @@ the median no-contact readings of the two datasets' training splits.
 Outputs (in --output, default experiments/results/): `ablation_table1.json` (every
 run's metrics, the settings and the timings), `ablation_table1.md` (the table) and
 `ablation_table1.png` (force and angle RMSEs per row) and `ablation_table1_error_map_SENSOR.png`
-(the paper's Fig. 5: each row's localisation error over the skin). Datasets and training runs are
+(the paper's Fig. 5: each row's localisation error over the skin), each dataset's channel swing
+beside the paper's 3-9 kPa in the table's text, and `ablation_table1_models.md`, the table beside
+another run's (`--compare`, by default the committed run under the cones). Datasets and training runs are
 kept under `ablation_table1.work/` and resume when the script is run again.
 
 Run: `.venv/bin/python experiments/ablation_table1.py [--events 2500] [--seeds 3] [--smoke]`.
@@ -86,6 +88,8 @@ def main() -> None:
     parser.add_argument("--max-epochs", type=int, default=TrainConfig().max_epochs)
     parser.add_argument("--output", type=Path, default=Path(__file__).parent / "results")
     parser.add_argument("--smoke", action="store_true", help="tiny datasets (sphere8 only), one seed, two epochs: for the tests")
+    parser.add_argument("--compare", type=Path, default=Path(__file__).parent / "results" / f"{NAME}_cones.json",
+                        help="another run's ablation_table1.json to set beside this one's table (default: the committed run under the cones, if there)")
     args = parser.parse_args()
     smoke = {}
     if args.smoke:
@@ -95,7 +99,7 @@ def main() -> None:
     work = output / f"{NAME}.work"
     work.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
-    runs, timings = [], {}
+    runs, timings, swing = [], {}, {}
     sensors = [name for name in args.sensors.split(",") if name]
     trained_for_ageing = None
     for sensor_name in sensors:
@@ -103,6 +107,7 @@ def main() -> None:
         t = time.perf_counter()
         dataset = load_dataset(_dataset(work / f"{sensor_name}_dataset", sensor_name, MATERIAL, args.events, args.smoke))
         timings[f"generate {sensor_name}"] = time.perf_counter() - t
+        swing[sensor_name] = dict(zip(dataset.channels, dataset.manifest["statistics"]["channel_std_Pa"]))
         radius = calc_skin_radius(sensor)
         rate = float(dataset.manifest["config"]["rate_hz"])
         for architecture, hidden, label in ROWS:
@@ -148,12 +153,17 @@ def main() -> None:
         "settings": {"events": args.events, "seeds": args.seeds, "sensors": sensors, "max_epochs": args.max_epochs, "smoke": args.smoke, "material": MATERIAL},
         "runs": runs, "table": table, "ageing": ageing, "timings_s": timings | {"total": time.perf_counter() - started},
         "budgets": {s: {label: count_parameters(make_estimator_spec(load_sensor(s), a, True, h)) for a, h, label in ROWS} for s in sensors},
+        "channel_swing_Pa": swing,
     }
     output.mkdir(parents=True, exist_ok=True)
     write_text_atomic(output / f"{NAME}.json", json.dumps(document, indent=2) + "\n")
     settings = (f"{args.events} events per dataset, {args.seeds} seed(s), at most {args.max_epochs} epochs{' (smoke)' if args.smoke else ''}; "
                 f"{document['timings_s']['total'] / 60:.0f} min in this invocation (datasets and models read back from the work folder not counted).")
-    write_text_atomic(output / f"{NAME}.md", settings + " " + _markdown(table, ageing))
+    write_text_atomic(output / f"{NAME}.md", settings + " " + _markdown(table, ageing) + _swing_markdown(swing))
+    if args.compare is not None and args.compare.is_file():
+        other = json.loads(args.compare.read_text())
+        write_text_atomic(output / f"{NAME}_models.md", side_by_side(table, other["table"], args.compare.name))
+        print(f"written {output / NAME}_models.md (this run beside {args.compare})")
     _plot(table, output / f"{NAME}.png")
     for sensor_name in sensors:
         _plot_error_maps(runs, sensor_name, output / f"{NAME}_error_map_{sensor_name}.png")
@@ -192,6 +202,38 @@ def _markdown(table: list, ageing) -> str:
         cases = [(k, ageing[k]) for k in ("fresh", "aged_untared", "aged_tared")]
         text += "\nAgeing (sphere8, binned GRU, seed 0): " + "; ".join(f"{k}: Fn RMSE {v['fn_rmse']:.3g} N, theta RMSE {v['theta_rmse']:.3g} rad" for k, v in cases) + "\n"
     return text
+
+
+def _swing_markdown(swing: dict) -> str:
+    """Each dataset's channel swing (std over the session), beside the paper's 3-9 kPa."""
+    lines = [f"- {sensor}: " + ", ".join(f"{name} {1e-3 * value:.2f}" for name, value in channels.items()) for sensor, channels in swing.items()]
+    return "\nChannel swing (each channel's standard deviation over the session, kPa; the paper's sensor: 3-9 kPa):\n" + "\n".join(lines) + "\n"
+
+
+SIDE_BY_SIDE = {"theta_rmse": "θ (rad)", "phi_rmse": "φ (rad)", "arc_length_mean": "arc (mm)", "fn_rmse": "Fn (N)", "contact_bce": "contact BCE"}
+
+
+def side_by_side(table: list, other: list, other_name: str) -> str:
+    """This run's table beside another's (`other`, e.g. the run under the cones), row by
+    row: each metric's mean over seeds as "this / other". Rows pair by sensor (a
+    "-cones" suffix dropped, so sphere8 meets sphere8-cones), model and angle head."""
+    def key(entry):
+        return entry["sensor"].removesuffix("-cones"), entry["row"], entry["binned"]
+
+    others = {key(entry): entry for entry in other}
+    unit = {"arc_length_mean": 1e3}
+    head = "| sensor | model | angles | " + " | ".join(SIDE_BY_SIDE.values()) + " |\n|---|---|---|" + "---:|" * len(SIDE_BY_SIDE) + "\n"
+    body = ""
+    for entry in table:
+        match = others.get(key(entry))
+
+        def cell(name, entry=entry, match=match):
+            mine = f"{unit.get(name, 1.0) * entry[name]['mean']:.3g}" if name in entry else "-"
+            theirs = f"{unit.get(name, 1.0) * match[name]['mean']:.3g}" if match is not None and name in match else "-"
+            return f"{mine} / {theirs}"
+
+        body += f"| {key(entry)[0]} | {entry['row']} | {'binned' if entry['binned'] else 'plain'} | " + " | ".join(cell(n) for n in SIDE_BY_SIDE) + " |\n"
+    return f"Held-out errors, mean over seeds: this run / {other_name}.\n\n" + head + body
 
 
 def _plot(table: list, path: Path) -> None:

@@ -96,6 +96,11 @@ def test_ablation_table1_and_fine_tuning_curve_smoke(tmp_path, monkeypatch):
     assert paper_rnn["parameters"] == 4205  # the paper's Binned RNN on the sphere
     assert set(report["ageing"]) >= {"fresh", "aged_untared", "aged_tared"}
     assert "| sphere8 | GRU (budget) | binned |" in (tmp_path / "ablation_table1.md").read_text()
+    assert set(report["channel_swing_Pa"]["sphere8"]) == {f"b{k}" for k in range(8)} and "3-9 kPa" in (tmp_path / "ablation_table1.md").read_text()
+    # Beside the committed run under the cones, row by row (this run's number first).
+    cones = {(e["row"], e["binned"]): e for e in json.loads((ROOT / "experiments" / "results" / "ablation_table1_cones.json").read_text())["table"] if e["sensor"] == "sphere8"}
+    row = next(line for line in (tmp_path / "ablation_table1_models.md").read_text().splitlines() if line.startswith("| sphere8 | RNN (paper) | binned |"))
+    assert row.split(" | ")[3] == f"{paper_rnn['theta_rmse']['mean']:.3g} / {cones[('RNN (paper)', True)]['theta_rmse']['mean']:.3g}"
     # The fine-tuning curve starts from the ablation's binned GRU (seed 0).
     pretrained = tmp_path / "ablation_table1.work" / "sphere8_gru_binned_0"
     run_experiment(monkeypatch, "fine_tuning_curve", "--smoke", "--pretrained", pretrained, "--output", tmp_path)
