@@ -233,6 +233,51 @@ def test_batched_trajectory_matches_single_poses():
         np.testing.assert_allclose(np.asarray(batch.calc_force()[k]), np.asarray(single.calc_force()), rtol=1e-12, atol=1e-15)
 
 
+def test_the_column_clipping_is_the_single_polygon_clip_four_times(rng):
+    """The soft-rigid kernel's clipping (P triangles by their tets' four faces, as
+    arrays) against :func:`clip_polygon` applied face by face to one polygon at a time:
+    random triangles about random tets, and dyadic ones that tie (a triangle in a face's
+    plane, a corner on a tet vertex, an edge through a tet edge), where every distance
+    is exact."""
+    from hydrotact.contact._polygon import calc_tet_face_planes, clip_polygon, clip_polygon_by_tet_faces_columns
+
+    unit = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
+    tets = [unit + rng.normal(scale=0.3, size=(4, 3)) for _ in range(200)]
+    triangles = [rng.normal(scale=0.6, size=(3, 3)) + 0.25 for _ in range(200)]
+    ties = [
+        [[0.25, 0.25, 0.0], [0.5, 0.125, 0.0], [0.125, 0.5, 0.0]],  # in the face z = 0
+        [[0.0, 0.0, 0.0], [0.5, 0.5, 0.5], [-0.5, 0.5, 0.25]],  # a corner on vertex 0
+        [[0.5, 0.0, -0.25], [0.5, 0.0, 0.75], [0.75, 0.5, 0.25]],  # an edge in the face y = 0
+        [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],  # the face itself
+        [[-0.5, -0.5, 0.5], [1.5, -0.5, 0.5], [0.5, 1.5, 0.5]],  # a cut through the middle, wider than the tet
+    ]
+    for triangle in ties:
+        tets.append(unit.copy())
+        triangles.append(np.asarray(triangle))
+    for k in range(len(tets)):  # positively oriented, as the meshes are
+        a, b, c, d = tets[k]
+        if np.dot(np.cross(b - a, c - a), d - a) < 0:
+            tets[k] = tets[k][[0, 2, 1, 3]]
+    tets, triangles = jnp.asarray(np.stack(tets)), jnp.asarray(np.stack(triangles))
+    planes = calc_tet_face_planes(tets)  # (P, 4, 4)
+    normals, offsets = jnp.transpose(planes[..., :3], (1, 2, 0)), planes[..., 3].T
+    columns, counts = jax.jit(clip_polygon_by_tet_faces_columns)(jnp.transpose(triangles, (2, 1, 0)), jnp.full(len(tets), 3), normals, offsets)
+
+    @jax.jit
+    @jax.vmap
+    def one_by_one(triangle, tet_planes):
+        vertices, count = jnp.zeros((8, 3)).at[:3].set(triangle), 3
+        for face in range(4):
+            vertices, count = clip_polygon(vertices, count, tet_planes[face, :3], tet_planes[face, 3])
+        return vertices, count
+
+    rows, row_counts = one_by_one(triangles, planes)
+    np.testing.assert_array_equal(np.asarray(counts), np.asarray(row_counts))
+    assert 0 < np.sum(np.asarray(counts) == 0) < len(tets) and np.all(np.asarray(counts)[-5:] >= 3)
+    for k, count in enumerate(np.asarray(counts)):
+        np.testing.assert_allclose(np.asarray(columns[:, :count, k]).T, np.asarray(rows[k, :count]), rtol=0, atol=1e-14, err_msg=str(k))
+
+
 def test_clip_polygon_cases():
     square = jnp.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]] + [[0, 0, 0]] * 4, dtype=float)
     # Cut off the corner x + y > 1.5: a pentagon with area 1 - 0.125.

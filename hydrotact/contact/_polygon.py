@@ -93,67 +93,52 @@ def calc_polygon_integrals(vertices, count, pressures, normal):
 # are the same as the one-polygon functions above, vertex for vertex.
 
 
-def clip_polygon_columns(vertices, count, normal, offset):
-    """Clip P polygons, each by its own half-space normal . x <= offset (Sutherland-
-    Hodgman, as :func:`clip_polygon`), without gathers.
+def _clip_stage_columns(vertices, count, normal, offset):
+    """One Sutherland-Hodgman stage of :func:`clip_polygon_by_tet_faces_columns`:
+    P polygons as arrays, vertices (n, 3, P), count (P,), each clipped by its own
+    half-space normal . x <= offset (normal (3, P), offset (P,)); -> vertices
+    (n + 1, 3, P), count (P,).
 
-    Polygons are lists of vertices, each (3, P): the output has one more vertex slot
-    than the input (a convex polygon gains at most one vertex per clip), and output
-    slot s is selected from the vertex (or edge crossing) whose emitted range holds s,
-    by a chain of selects over (P,) rows.
-
-    **Arguments:** vertices: list of n arrays (3, P); count (P,); normal (3, P);
-    offset (P,).
-
-    **Returns:** (list of n + 1 arrays (3, P), count (P,)).
+    Each vertex emits its own point (when inside) and its edge's crossing (when the
+    edge crosses), at slots given by a running count; output slot s then takes the one
+    candidate whose slot is s, by a one-hot sum over the 2n candidates (exact: one
+    term at most is not zero). Written as arrays, a stage is a few dozen operations
+    whatever n; the chain of n (n + 1) selects it replaced made three quarters of the
+    soft-rigid kernel's program and half its compile time (benchmarks/RESULTS.md,
+    issue 48).
     """
-    n = len(vertices)
-    # Keep the reduction over the 3-long axis: it is a fusion barrier. Written as
-    # v[0] * n[0] + v[1] * n[1] + v[2] * n[2], XLA's CPU fusion recomputes each clip
-    # stage's vertices inside every select of the next, and four chained stages made
-    # the contact 100x slower (benchmarks/RESULTS.md, issue 12).
-    distance = [jnp.sum(v * normal, axis=0) - offset for v in vertices]
-    keep, crosses, crossing, starts = [], [], [], []
-    emitted_before = jnp.zeros_like(count)
-    for i in range(n):
-        if i + 1 < n:
-            is_last = i == count - 1
-            following = jnp.where(is_last[None], vertices[0], vertices[i + 1])
-            next_distance = jnp.where(is_last, distance[0], distance[i + 1])
-        else:
-            following, next_distance = vertices[0], distance[0]
-        active = i < count
-        inside = distance[i] <= 0.0
-        crosses.append(active & (inside != (next_distance <= 0.0)))
-        t = safe_div(distance[i], distance[i] - next_distance)
-        crossing.append(vertices[i] + t[None] * (following - vertices[i]))
-        keep.append(active & inside)
-        starts.append(emitted_before)
-        emitted_before = emitted_before + keep[i].astype(count.dtype) + crosses[i].astype(count.dtype)
-    # The slot each vertex's own point and its crossing go to (-1: none).
-    own_slot = [jnp.where(keep[i], starts[i], -1) for i in range(n)]
-    crossing_slot = [jnp.where(crosses[i], starts[i] + keep[i].astype(count.dtype), -1) for i in range(n)]
-    out = []
-    for s in range(n + 1):
-        slot = jnp.zeros_like(vertices[0])
-        for i in range(n):
-            # Vertex i emits at most two points, at slots starts[i] <= 2 i and the next.
-            if 2 * i >= s:
-                slot = jnp.where((own_slot[i] == s)[None], vertices[i], slot)
-            if 2 * i + 1 >= s:
-                slot = jnp.where((crossing_slot[i] == s)[None], crossing[i], slot)
-        out.append(slot)
-    return out, jnp.minimum(emitted_before, n + 1)
+    n = vertices.shape[0]
+    # Keep the reduction over the 3-long axis: it is a fusion barrier (written as
+    # v[0] * n[0] + v[1] * n[1] + v[2] * n[2], XLA's CPU fusion recomputed each stage's
+    # vertices inside the next, and four chained stages ran 100x slower; issue 12).
+    distance = jnp.sum(vertices * normal[None], axis=1) - offset[None]  # (n, P)
+    index = jnp.arange(n)[:, None]
+    is_last = index == (count - 1)[None]
+    following = jnp.where(is_last[:, None], vertices[:1], jnp.roll(vertices, -1, axis=0))
+    next_distance = jnp.where(is_last, distance[:1], jnp.roll(distance, -1, axis=0))
+    active = index < count[None]
+    inside = distance <= 0.0
+    crosses = active & (inside != (next_distance <= 0.0))
+    t = safe_div(distance, distance - next_distance)
+    crossing = vertices + t[:, None] * (following - vertices)
+    keep = active & inside
+    emitted = keep.astype(count.dtype) + crosses.astype(count.dtype)
+    starts = jnp.cumsum(emitted, axis=0) - emitted
+    slots = jnp.concatenate([jnp.where(keep, starts, -1), jnp.where(crosses, starts + keep.astype(count.dtype), -1)])  # (2n, P)
+    candidates = jnp.concatenate([vertices, crossing])  # (2n, 3, P)
+    chosen = slots[None] == jnp.arange(n + 1)[:, None, None]  # (n + 1, 2n, P)
+    out = jnp.sum(jnp.where(chosen[:, :, None], candidates[None], 0.0), axis=1)
+    return out, jnp.minimum(starts[-1] + emitted[-1], n + 1)
 
 
 def clip_polygon_by_tet_faces_columns(vertices, count, face_normals, face_offsets):
     """Clip P polygons by the four faces of their tets: `face_normals` (4, 3, P) and
     `face_offsets` (4, P), each face's outward normal and offset, as
     :func:`calc_tet_face_planes` gives them. vertices (3, n, P) -> (3, n + 4, P)."""
-    vertices = [vertices[:, k] for k in range(vertices.shape[1])]
+    vertices = jnp.transpose(vertices, (1, 0, 2))
     for face in range(4):
-        vertices, count = clip_polygon_columns(vertices, count, face_normals[face], face_offsets[face])
-    return jnp.stack(vertices, axis=1), count
+        vertices, count = _clip_stage_columns(vertices, count, face_normals[face], face_offsets[face])
+    return jnp.transpose(vertices, (1, 0, 2)), count
 
 
 def calc_tet_face_planes(tet_vertices):
