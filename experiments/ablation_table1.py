@@ -223,16 +223,14 @@ def side_by_side(table: list, other: list, other_name: str) -> str:
     others = {key(entry): entry for entry in other}
     unit = {"arc_length_mean": 1e3}
     head = "| sensor | model | angles | " + " | ".join(SIDE_BY_SIDE.values()) + " |\n|---|---|---|" + "---:|" * len(SIDE_BY_SIDE) + "\n"
+    def mean(entry, name):
+        return f"{unit.get(name, 1.0) * entry[name]['mean']:.3g}" if entry is not None and name in entry else "-"
+
     body = ""
     for entry in table:
         match = others.get(key(entry))
-
-        def cell(name, entry=entry, match=match):
-            mine = f"{unit.get(name, 1.0) * entry[name]['mean']:.3g}" if name in entry else "-"
-            theirs = f"{unit.get(name, 1.0) * match[name]['mean']:.3g}" if match is not None and name in match else "-"
-            return f"{mine} / {theirs}"
-
-        body += f"| {key(entry)[0]} | {entry['row']} | {'binned' if entry['binned'] else 'plain'} | " + " | ".join(cell(n) for n in SIDE_BY_SIDE) + " |\n"
+        cells = " | ".join(f"{mean(entry, name)} / {mean(match, name)}" for name in SIDE_BY_SIDE)
+        body += f"| {key(entry)[0]} | {entry['row']} | {'binned' if entry['binned'] else 'plain'} | {cells} |\n"
     return f"Held-out errors, mean over seeds: this run / {other_name}.\n\n" + head + body
 
 

@@ -277,6 +277,17 @@ def plot(results, path, title, references=None):
     plt.close(figure)
 
 
+def _trace_key(sweep: str, name: str) -> str:
+    """The name of one sweep's array in `probe_sweep_pad5x5*.npz`."""
+    return f"{sweep.replace(' ', '_')}/{name}"
+
+
+def read_traces(path) -> dict:
+    """A run's traces as written to its .npz: {sweep: {"s", "taxels"}}."""
+    with np.load(path) as saved:
+        return {sweep: {k: saved[_trace_key(sweep, k)] for k in ("s", "taxels")} for sweep in SWEEPS}
+
+
 def plot_models(disk, elastic, path):
     """The two barometer models' normalised curves of the three innermost cells along
     each sweep, over each other (solid: elastic, dashed: ray-cast disks)."""
@@ -369,15 +380,13 @@ def main(argv=None):
     stem = args.output / name
     write_text_atomic(stem.with_suffix(".json"), json.dumps(report, indent=2) + "\n")
     with atomic_path(stem.with_suffix(".npz"), suffix=".npz") as tmp:
-        np.savez_compressed(tmp, **{f"{sweep.replace(' ', '_')}/{k}": v for sweep, r in results.items() for k, v in r.items()})
+        np.savez_compressed(tmp, **{_trace_key(sweep, k): v for sweep, r in results.items() for k, v in r.items()})
     model_text = "elastic barometers (the elastomer's pressure, 0.5 mm ports)" if elastic else f"{rays} rays per taxel"
     plot(results, stem.with_suffix(".png"), f"pad5x5, 2 mm cylinder at {TARGET_FORCE} N, {model_text}", None if elastic else references)
     written = [stem.with_suffix(".json"), stem.with_suffix(".png"), stem.with_suffix(".npz")]
     disk_traces = args.output / f"{NAME}.npz"
     if elastic and disk_traces.is_file():
-        with np.load(disk_traces) as saved:
-            disk = {sweep: {k: saved[f"{sweep.replace(' ', '_')}/{k}"] for k in ("s", "taxels")} for sweep in SWEEPS}
-        plot_models(disk, results, args.output / f"{NAME}_models.png")
+        plot_models(read_traces(disk_traces), results, args.output / f"{NAME}_models.png")
         written.append(args.output / f"{NAME}_models.png")
     for sweep in SWEEPS:
         for part in ("sweep", "reference"):

@@ -73,8 +73,7 @@ def test_probe_sweep_smoke(tmp_path, monkeypatch):
     disk, elastic = sweep.sensor("disk"), sweep.sensor("elastic")
     assert not disk.is_elastic.any() and elastic.is_elastic.all() and elastic.name == "pad5x5-elastic"
     np.testing.assert_array_equal(elastic.taxel_positions_S, disk.taxel_positions_S)
-    with np.load(tmp_path / "probe_sweep_pad5x5.npz") as saved:
-        traces = {name: {k: saved[f"{name.replace(' ', '_')}/{k}"] for k in ("s", "taxels")} for name in sweep.SWEEPS}
+    traces = sweep.read_traces(tmp_path / "probe_sweep_pad5x5.npz")
     sweep.plot_models(traces, traces, tmp_path / "models.png")
     assert (tmp_path / "models.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 

@@ -122,13 +122,15 @@ def _clip_stage_columns(vertices, count, normal, offset):
     t = safe_div(distance, distance - next_distance)
     crossing = vertices + t[:, None] * (following - vertices)
     keep = active & inside
-    emitted = keep.astype(count.dtype) + crosses.astype(count.dtype)
-    starts = jnp.cumsum(emitted, axis=0) - emitted
-    slots = jnp.concatenate([jnp.where(keep, starts, -1), jnp.where(crosses, starts + keep.astype(count.dtype), -1)])  # (2n, P)
+    kept = keep.astype(count.dtype)
+    emitted = kept + crosses.astype(count.dtype)
+    emitted_by = jnp.cumsum(emitted, axis=0)  # after each vertex
+    starts = emitted_by - emitted
+    slots = jnp.concatenate([jnp.where(keep, starts, -1), jnp.where(crosses, starts + kept, -1)])  # (2n, P)
     candidates = jnp.concatenate([vertices, crossing])  # (2n, 3, P)
     chosen = slots[None] == jnp.arange(n + 1)[:, None, None]  # (n + 1, 2n, P)
     out = jnp.sum(jnp.where(chosen[:, :, None], candidates[None], 0.0), axis=1)
-    return out, jnp.minimum(starts[-1] + emitted[-1], n + 1)
+    return out, jnp.minimum(emitted_by[-1], n + 1)
 
 
 def clip_polygon_by_tet_faces_columns(vertices, count, face_normals, face_offsets):
