@@ -22,7 +22,11 @@ run's metrics, the settings and the timings), `ablation_table1.md` (the table) a
 (the paper's Fig. 5: each row's localisation error over the skin), each dataset's channel swing
 beside the paper's 3-9 kPa in the table's text, and `ablation_table1_models.md`, the table beside
 another run's (`--compare`, by default the committed run under the cones). Datasets and training runs are
-kept under `ablation_table1.work/` and resume when the script is run again.
+kept under `ablation_table1.work/` and resume when the script is run again. Each finished model's
+record (its metrics and error map, with the settings it ran under) is also written to
+`ablation_table1.runs/` beside the outputs, a small file meant to be committed: a run under the
+same settings reads it back instead of training that model again, so a long run continues on
+another checkout, where the work folder is gone (the datasets are made again, byte for byte).
 
 Run: `.venv/bin/python experiments/ablation_table1.py [--events 2500] [--seeds 3] [--smoke]`.
 """
@@ -39,7 +43,7 @@ jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
 
-from hydrotact._files import atomic_path, write_text_atomic  # noqa: E402
+from hydrotact._files import atomic_path, digest, write_text_atomic  # noqa: E402
 from hydrotact.data import make_material_document, write_material  # noqa: E402
 from hydrotact.datasets import DatasetConfig, generate_dataset, load_dataset  # noqa: E402
 from hydrotact.models import (  # noqa: E402
@@ -71,6 +75,18 @@ def _dataset(folder: Path, sensor: str, material: tuple, events: int, smoke: boo
     return folder
 
 
+def read_record(path: Path, settings: dict):
+    """The record at `path` if it was written under `settings` (else None: trained again)."""
+    if not path.is_file():
+        return None
+    document = json.loads(path.read_text())
+    return document["record"] if document.get("settings") == json.loads(json.dumps(settings)) else None
+
+
+def write_record(path: Path, settings: dict, record: dict) -> None:
+    write_text_atomic(path, json.dumps({"settings": settings, "record": record}, indent=1) + "\n")
+
+
 def _tare(dataset, reference) -> np.ndarray:
     """Per channel, the median no-contact reading of `dataset`'s training split minus `reference`'s."""
     shifts = []
@@ -98,10 +114,13 @@ def main() -> None:
     output = args.output
     work = output / f"{NAME}.work"
     work.mkdir(parents=True, exist_ok=True)
+    records = output / f"{NAME}.runs"
+    records.mkdir(exist_ok=True)
+    settings = {"events": args.events, "max_epochs": args.max_epochs, "smoke": args.smoke, "material": MATERIAL, "aged": AGED}
     started = time.perf_counter()
     runs, timings, swing = [], {}, {}
     sensors = [name for name in args.sensors.split(",") if name]
-    trained_for_ageing = None
+    trained_for_ageing = ageing_settings = None
     for sensor_name in sensors:
         sensor = load_sensor(sensor_name)
         t = time.perf_counter()
@@ -110,11 +129,21 @@ def main() -> None:
         swing[sensor_name] = dict(zip(dataset.channels, dataset.manifest["statistics"]["channel_std_Pa"]))
         radius = calc_skin_radius(sensor)
         rate = float(dataset.manifest["config"]["rate_hz"])
+        # Records are read back only for this very dataset (its request and its shards' bytes).
+        dataset_settings = settings | {"dataset": digest(json.dumps([dataset.manifest["request_digest"], dataset.manifest["shards"]], sort_keys=True))}
         for architecture, hidden, label in ROWS:
             for binned in (True, False):
                 for seed in range(args.seeds):
                     config = TrainConfig(architecture=architecture, binned=binned, hidden=hidden, seed=seed, max_epochs=args.max_epochs, **smoke)
                     folder = work / f"{sensor_name}_{architecture}{'_' + '-'.join(map(str, hidden)) if hidden else ''}_{'binned' if binned else 'plain'}_{seed}"
+                    record = records / f"{folder.name}.json"
+                    ageing_needs_it = sensor_name == "sphere8" and architecture == "gru" and hidden is None and binned and seed == 0
+                    if ageing_needs_it:  # the ageing test's record goes with this model's dataset
+                        ageing_settings = dataset_settings
+                    if (run := read_record(record, dataset_settings)) is not None and not (ageing_needs_it and read_record(records / "ageing.json", dataset_settings) is None):
+                        runs.append(run)
+                        print(f"{sensor_name} {label} {'binned' if binned else 'plain'} seed {seed}: read back from {record}", flush=True)
+                        continue
                     folder.mkdir(exist_ok=True)
                     t = time.perf_counter()
                     trained = train_estimator(dataset, sensor, config, folder=folder)
@@ -130,12 +159,13 @@ def main() -> None:
                         "error_map": {k: np.asarray(v).tolist() for k, v in error_map.items() if k in ("theta_edges", "phi_edges", "count")}
                         | {"mean": [[None if np.isnan(x) else float(x) for x in row] for row in error_map["mean"]], "unit": error_map["unit"]},
                     })
+                    write_record(record, dataset_settings, runs[-1])
                     print(f"{sensor_name} {label} {'binned' if binned else 'plain'} seed {seed}: {runs[-1]['parameters']} parameters, "
                           + ", ".join(f"{k} {v:.3g}" for k, v in result["metrics"].items()), flush=True)
-                    if sensor_name == "sphere8" and architecture == "gru" and hidden is None and binned and seed == 0:
+                    if ageing_needs_it:
                         trained_for_ageing = (trained, dataset)
-    ageing = None
-    if trained_for_ageing is not None:
+    ageing = read_record(records / "ageing.json", ageing_settings) if ageing_settings is not None else None
+    if ageing is None and trained_for_ageing is not None:
         trained, dataset = trained_for_ageing
         aged = load_dataset(_dataset(work / "sphere8_aged_dataset", "sphere8", AGED, args.events, args.smoke))
         shift = _tare(aged, dataset)
@@ -148,6 +178,7 @@ def main() -> None:
             "aged_untared": evaluate_estimator(trained, aged.blocks("test"), rate, radius)["metrics"],
             "aged_tared": evaluate_estimator(trained, tared, rate, radius)["metrics"],
         }
+        write_record(records / "ageing.json", ageing_settings, ageing)
     table = _table(runs)
     document = {
         "settings": {"events": args.events, "seeds": args.seeds, "sensors": sensors, "max_epochs": args.max_epochs, "smoke": args.smoke, "material": MATERIAL},
@@ -157,9 +188,9 @@ def main() -> None:
     }
     output.mkdir(parents=True, exist_ok=True)
     write_text_atomic(output / f"{NAME}.json", json.dumps(document, indent=2) + "\n")
-    settings = (f"{args.events} events per dataset, {args.seeds} seed(s), at most {args.max_epochs} epochs{' (smoke)' if args.smoke else ''}; "
-                f"{document['timings_s']['total'] / 60:.0f} min in this invocation (datasets and models read back from the work folder not counted).")
-    write_text_atomic(output / f"{NAME}.md", settings + " " + _markdown(table, ageing) + _swing_markdown(swing))
+    summary = (f"{args.events} events per dataset, {args.seeds} seed(s), at most {args.max_epochs} epochs{' (smoke)' if args.smoke else ''}; "
+                f"{document['timings_s']['total'] / 60:.0f} min in this invocation (datasets and models read back from the work folder or the records not counted).")
+    write_text_atomic(output / f"{NAME}.md", summary + " " + _markdown(table, ageing) + _swing_markdown(swing))
     if args.compare is not None and args.compare.is_file():
         other = json.loads(args.compare.read_text())
         write_text_atomic(output / f"{NAME}_models.md", side_by_side(table, other["table"], args.compare.name))
@@ -167,7 +198,7 @@ def main() -> None:
     _plot(table, output / f"{NAME}.png")
     for sensor_name in sensors:
         _plot_error_maps(runs, sensor_name, output / f"{NAME}_error_map_{sensor_name}.png")
-    print(settings + " " + _markdown(table, ageing))
+    print(summary + " " + _markdown(table, ageing))
     print(f"written {output / NAME}.json, .md, .png, _error_map_*.png")
 
 

@@ -39,7 +39,12 @@ table), `layout_design.png` (the metrics per layout with their spread),
 `layout_design_layouts.png` (the four layouts inside the cut-open elastomer),
 `layout_design_convergence.png` and the designed sensor `layout_design_sensor.json`.
 The design, datasets and models are kept under `layout_design.work/` and resume when
-the script is run again.
+the script is run again. Each finished design (its scores and layouts), each layout's
+nearest-neighbour check and each trained model's metrics are also written to
+`layout_design.runs/`, small files meant to be committed, with the settings they ran
+under: a run under the same settings reads them back instead of designing, generating
+or training again, so a long run continues on another checkout (as ablation_table1.py's
+records do).
 
 Run: `.venv/bin/python experiments/layout_design.py [--events 1000] [--seeds 3] [--smoke]`.
 """
@@ -55,9 +60,9 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
-from ablation_table1 import MATERIAL, SMOKE_REGIME, summarise_metrics  # noqa: E402  (its neighbour in experiments/: the same silicone, tiny regime, table)
+from ablation_table1 import MATERIAL, SMOKE_REGIME, read_record, summarise_metrics, write_record  # noqa: E402  (its neighbour in experiments/: the same silicone, tiny regime, table, records)
 
-from hydrotact._files import atomic_path, write_text_atomic  # noqa: E402
+from hydrotact._files import atomic_path, digest, write_text_atomic  # noqa: E402
 from hydrotact.data import make_material_document, write_material  # noqa: E402
 from hydrotact.datasets import DatasetConfig, generate_dataset, load_dataset  # noqa: E402
 from hydrotact.design import DesignConfig, calc_neighbour_features, design_layout, make_feasible_region, make_noise_model  # noqa: E402
@@ -101,14 +106,16 @@ def _score(score) -> dict:
     return {"score": score.score, "held_out_score": score.held_out_score, "rms_bound_m": score.rms_bound, "rms_neighbour_error_m": score.rms_neighbour_error}
 
 
-def _design(spec, args, smoke: bool, work: Path, material: dict, design: str) -> dict:
-    """One design (`design`: one of DESIGNS), its layouts' sensor files and scores
-    (kept in work/design_{design}.json): for `risers` the designed, built-in and
-    regular layouts; for `risers-d` the designed one; for `inside` the designed one
-    and its first random start."""
-    kept = work / f"design_{design}.json"
-    if kept.is_file():
-        return json.loads(kept.read_text())
+def _design(spec, args, smoke: bool, work: Path, records: Path, material: dict, design: str) -> dict:
+    """One design (`design`: one of DESIGNS), its layouts' sensor files (in
+    work/sensors/) and scores, kept as the record records/design_{design}.json: for
+    `risers` the designed, built-in and regular layouts; for `risers-d` the designed
+    one; for `inside` the designed one and its first random start."""
+    settings = {"sensor": digest(document_text(spec)), "material": MATERIAL, "smoke": smoke}  # (the material document carries its creation time)
+    if not smoke:
+        settings |= {k: getattr(args, k) for k in ("design_contacts", "learned_contacts", "design_batch", "design_steps", "design_restarts", "design_probe")}
+    if (document := read_record(records / f"design_{design}.json", settings)) is not None:
+        return _write_sensors(document, work)
     mesh = spec.make_mesh(check=False)
     max_height = float(np.max(spec.taxel_positions_S[:, 2]) - np.min(mesh.vertices[:, 2])) if design.startswith("risers") else None
     objective = OBJECTIVE_OF[design]
@@ -132,16 +139,22 @@ def _design(spec, args, smoke: bool, work: Path, material: dict, design: str) ->
     else:
         layouts = {"designed-inside": result.spec, "random": _with_positions(spec, *result.start_layouts[random_index], "random")}
         scores = {"designed-inside": _score(result.designed), "random": _score(result.random[random_index - 1]), "built-in": _score(result.builtin), "regular": _score(result.compared["regular"])}
-    files = {}
-    for name, layout in layouts.items():
-        files[name] = str(work / "sensors" / f"{name}.json")
-        write_text_atomic(Path(files[name]), document_text(layout))
     document = {
-        "config": config.to_json(), "design_contacts_probe": regime.probe, "scores": scores, "sensors": files, "elapsed_s": result.elapsed_s,
+        "config": config.to_json(), "design_contacts_probe": regime.probe, "scores": scores, "elapsed_s": result.elapsed_s,
         "histories": [np.asarray(h).tolist() for h in result.histories], "start_names": result.start_names,
+        "layouts": {name: json.loads(document_text(layout)) for name, layout in layouts.items()},
     }
-    write_text_atomic(kept, json.dumps(document, indent=2) + "\n")
-    return document
+    write_record(records / f"design_{design}.json", settings, document)
+    return _write_sensors(document, work)
+
+
+def _write_sensors(document: dict, work: Path) -> dict:
+    """A design's layouts as sensor files in work/sensors/; the document with their paths."""
+    files = {}
+    for name, layout in document["layouts"].items():
+        files[name] = str(work / "sensors" / f"{name}.json")
+        write_text_atomic(Path(files[name]), json.dumps(layout, indent=2) + "\n")
+    return {key: value for key, value in document.items() if key != "layouts"} | {"sensors": files}
 
 
 def _neighbour_baseline(dataset, spec, radius: float | None) -> dict:
@@ -205,6 +218,8 @@ def main() -> None:
     output = args.output
     work = output / f"{NAME}.work"
     work.mkdir(parents=True, exist_ok=True)
+    records = output / f"{NAME}.runs"
+    records.mkdir(exist_ok=True)
     started = time.perf_counter()
     spec = load_sensor(args.sensor)
     material = make_material_document(*MATERIAL, name=NAME)
@@ -217,31 +232,45 @@ def main() -> None:
     layouts = tuple(layout for layout in LAYOUTS if DESIGN_OF[layout] in run_designs)
     for name in run_designs:
         t = time.perf_counter()
-        designs[name] = _design(spec, args, args.smoke, work, material, name)
+        designs[name] = _design(spec, args, args.smoke, work, records, material, name)
         timings[f"design {name}"] = time.perf_counter() - t
     sensors = {name: path for design in run_designs for name, path in designs[design]["sensors"].items()}
     scores = {layout: designs[DESIGN_OF[layout]]["scores"][layout] | {"pool": DESIGN_OF[layout]} for layout in layouts}
     radius = calc_skin_radius(spec)
     runs, baselines = [], {}
     for layout in layouts:
+        config = DatasetConfig(events=args.events, **(SMOKE_REGIME if args.smoke else {}))
+        # A layout's records hold for its sensor, dataset regime, material and training settings.
+        layout_digest = digest(json.dumps(json.loads(Path(sensors[layout]).read_text()), sort_keys=True))
+        settings = {"sensor": layout_digest, "dataset": config.to_json(), "material": MATERIAL, "max_epochs": args.max_epochs, "smoke": args.smoke}
+        models = [work / f"{layout}_gru_binned{inputs}_{seed}" for seed in range(args.seeds)]
+        baselines[layout] = read_record(records / f"{layout}_neighbours.json", settings)
+        kept = [read_record(records / f"{model.name}.json", settings | {"asinh_scale": args.asinh_scale}) for model in models]
+        if baselines[layout] is not None and all(run is not None for run in kept):
+            runs.extend(kept)
+            print(f"{layout}: the nearest-neighbour check and {len(kept)} model(s) read back from {records}", flush=True)
+            continue
         t = time.perf_counter()
         folder = work / f"{layout}_dataset"
-        config = DatasetConfig(events=args.events, **(SMOKE_REGIME if args.smoke else {}))
         generate_dataset(sensors[layout], folder, material=material_file, config=config, progress=not args.smoke)
         dataset = load_dataset(folder)
         timings[f"generate {layout}"] = time.perf_counter() - t
         rate = float(dataset.manifest["config"]["rate_hz"])
-        baselines[layout] = _neighbour_baseline(dataset, spec, radius)
-        for seed in range(args.seeds):
-            model = work / f"{layout}_gru_binned{inputs}_{seed}"
-            model.mkdir(exist_ok=True)
-            t = time.perf_counter()
-            trained = train_estimator(dataset, load_sensor(sensors[layout]), TrainConfig(seed=seed, max_epochs=args.max_epochs, asinh_scale=args.asinh_scale, **smoke), folder=model)
-            save_estimator(trained, model, sensors[layout])
-            result = evaluate_estimator(trained, dataset.blocks("test"), rate, radius)
-            runs.append({"layout": layout, "seed": seed, "epochs": len(trained.history), "best_epoch": trained.best_epoch,
-                         "wall_seconds": time.perf_counter() - t, "metrics": result["metrics"]})
-            print(f"{layout} seed {seed}: " + ", ".join(f"{k} {v:.3g}" for k, v in result["metrics"].items()), flush=True)
+        if baselines[layout] is None:
+            baselines[layout] = _neighbour_baseline(dataset, spec, radius)
+            write_record(records / f"{layout}_neighbours.json", settings, baselines[layout])
+        for seed, (model, run) in enumerate(zip(models, kept)):
+            if run is None:
+                model.mkdir(exist_ok=True)
+                t = time.perf_counter()
+                trained = train_estimator(dataset, load_sensor(sensors[layout]), TrainConfig(seed=seed, max_epochs=args.max_epochs, asinh_scale=args.asinh_scale, **smoke), folder=model)
+                save_estimator(trained, model, sensors[layout])
+                result = evaluate_estimator(trained, dataset.blocks("test"), rate, radius)
+                run = {"layout": layout, "seed": seed, "epochs": len(trained.history), "best_epoch": trained.best_epoch,
+                       "wall_seconds": time.perf_counter() - t, "metrics": result["metrics"]}
+                write_record(records / f"{model.name}.json", settings | {"asinh_scale": args.asinh_scale}, run)
+            runs.append(run)
+            print(f"{layout} seed {seed}: " + ", ".join(f"{k} {v:.3g}" for k, v in run["metrics"].items()), flush=True)
     table = _table(layouts, runs, scores, baselines)
     document = {
         "settings": {"sensor": args.sensor, "events": args.events, "seeds": args.seeds, "max_epochs": args.max_epochs, "asinh_scale": args.asinh_scale, "smoke": args.smoke,
@@ -257,7 +286,7 @@ def main() -> None:
                 f"designs: {how}; each {designs['risers']['config']['restarts']} random starts, "
                 f"{designs['risers']['config']['steps']} steps, risers at most {designs['risers']['config']['max_height'] * 1e3:.3g} mm high; "
                 f"{document['timings_s']['total'] / 60:.0f} min in this invocation"
-                f" (datasets and models read back from the work folder not counted).")
+                f" (designs, datasets and models read back from the work folder or the records not counted).")
     write_text_atomic(output / f"{stem}.md", settings + "\n\n" + _markdown(table))
     _plot(table, output / f"{stem}.png")
     written = ".json, .md, .png"

@@ -7,6 +7,7 @@ the same small models, so the programs one compiles serve the next.
 
 import json
 import runpy
+import shutil
 import sys
 import warnings
 from pathlib import Path
@@ -100,6 +101,13 @@ def test_ablation_table1_and_fine_tuning_curve_smoke(tmp_path, monkeypatch):
     cones = {(e["row"], e["binned"]): e for e in json.loads((ROOT / "experiments" / "results" / "ablation_table1_cones.json").read_text())["table"] if e["sensor"] == "sphere8"}
     row = next(line for line in (tmp_path / "ablation_table1_models.md").read_text().splitlines() if line.startswith("| sphere8 | RNN (paper) | binned |"))
     assert row.split(" | ")[3] == f"{paper_rnn['theta_rmse']['mean']:.3g} / {cones[('RNN (paper)', True)]['theta_rmse']['mean']:.3g}"
+    # On a checkout without the work folder's models, the committed records stand in for them.
+    shutil.rmtree(tmp_path / "ablation_table1.work" / "sphere8_mlp_plain_0")
+    run_experiment(monkeypatch, "ablation_table1", "--smoke", "--output", tmp_path)
+    assert not (tmp_path / "ablation_table1.work" / "sphere8_mlp_plain_0").exists()
+    again = json.loads((tmp_path / "ablation_table1.json").read_text())
+    assert json.dumps(again["runs"]) == json.dumps(report["runs"]) and again["ageing"] == report["ageing"]
+    assert len(list((tmp_path / "ablation_table1.runs").glob("*.json"))) == 8 + 1  # four models, binned and plain, one seed; the ageing
     # The fine-tuning curve starts from the ablation's binned GRU (seed 0).
     pretrained = tmp_path / "ablation_table1.work" / "sphere8_gru_binned_0"
     run_experiment(monkeypatch, "fine_tuning_curve", "--smoke", "--pretrained", pretrained, "--output", tmp_path)
@@ -147,3 +155,10 @@ def test_layout_design_smoke(tmp_path, monkeypatch):
     for name in ("layout_design.png", "layout_design_layouts.png", "layout_design_convergence.png"):
         assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
     assert "| designed |" in (tmp_path / "layout_design.md").read_text()
+    # On a checkout without the work folder, the committed records stand in for the
+    # designs, datasets and models: the same table, nothing designed or trained again.
+    shutil.rmtree(tmp_path / "layout_design.work")
+    run_experiment(monkeypatch, "layout_design", "--smoke", "--sensor", "sphere8-cones", "--output", tmp_path)
+    again = json.loads((tmp_path / "layout_design.json").read_text())
+    assert json.dumps(again["table"]) == json.dumps(report["table"]) and json.dumps(again["runs"]) == json.dumps(report["runs"])
+    assert not list((tmp_path / "layout_design.work").glob("*_dataset"))
