@@ -42,8 +42,7 @@ from hydrotact.elastic import (  # noqa: E402
     make_multigrid_preconditioner,
     make_receptive_fields,
 )
-from hydrotact.sensors import load_sensor  # noqa: E402
-from hydrotact.sensors._builtins import builtin_documents  # noqa: E402
+from hydrotact.sensors import load_sensor, with_receptive_fields  # noqa: E402
 from hydrotact.sim import SimCapacity, calc_unit_response, make_sensor_model  # noqa: E402
 
 NOISE_RMS_PA = 0.03  # BMP388
@@ -52,11 +51,7 @@ DEPTH = 0.3e-3
 
 
 def elastic_spec(name: str):
-    document = builtin_documents()[name]
-    document["name"] = f"{name}-elastic"
-    for taxel in document["taxels"]:
-        taxel["receptive_field"] = {"kind": "elastic"}
-    return load_sensor(document)
+    return with_receptive_fields(load_sensor(name), {"kind": "elastic"})
 
 
 def _peak_rss_gib() -> float:

@@ -54,7 +54,7 @@ import optimistix as optx  # noqa: E402
 
 from hydrotact._files import atomic_path, digest, write_text_atomic  # noqa: E402
 from hydrotact.contact import calc_contact_surface, compute_contact_surface, make_cylinder_probe, make_pose  # noqa: E402
-from hydrotact.sensors import load_sensor  # noqa: E402
+from hydrotact.sensors import load_sensor, with_receptive_fields  # noqa: E402
 from hydrotact.sim import SimCapacity, calc_unit_response, make_sensor_model  # noqa: E402
 from hydrotact.taxel import TaxelCapacity  # noqa: E402
 
@@ -78,13 +78,8 @@ SWEEPS = {
 def sensor(barometers: str):
     """pad5x5 as built in (`disk`: the paper's ray-cast taxels), or with every barometer
     `elastic` (the elastomer's pressure over a 0.5 mm port, nu 0.49), the layout the same."""
-    if barometers == "disk":
-        return load_sensor("pad5x5")
-    document = load_sensor("pad5x5").to_json()
-    document["name"] = "pad5x5-elastic"
-    for taxel in document["taxels"]:
-        taxel["receptive_field"] = {"kind": "elastic"}
-    return load_sensor(document, source="pad5x5 with elastic barometers")
+    pad = load_sensor("pad5x5")
+    return pad if barometers == "disk" else with_receptive_fields(pad, {"kind": "elastic"})
 
 
 def sweep_positions(name: str, step: float, smoke: bool, every: int = 1):

@@ -500,20 +500,9 @@ def test_elastic_barometers_in_the_forward_model(tmp_path, monkeypatch):
     np.testing.assert_allclose(np.asarray(all_samples.taxel_pressures)[:, spec.is_elastic], pressures[:, spec.is_elastic], rtol=1e-6)
 
 
-def _elastic_builtin(name):
-    """A built-in curved sensor with every barometer elastic (0.5 mm ports, the pressure)."""
-    from hydrotact.sensors import load_sensor
-    from hydrotact.sensors._builtins import builtin_documents
-
-    document = builtin_documents()[name]
-    for taxel in document["taxels"]:
-        taxel["receptive_field"] = {"kind": "elastic"}
-    return load_sensor(document)
-
-
 @pytest.mark.parametrize("name", ["sphere8", "ellipsoid8"])
 def test_the_curved_sensors_have_no_blind_patch_under_the_elastic_model(name, monkeypatch, tmp_path):
-    """sphere8 and ellipsoid8 with their built-in layouts made elastic: every touchable
+    """sphere8 and ellipsoid8 as built in (elastic barometers): every touchable
     skin point (uniform by area), pressed along its inward normal by the dataset
     generator's 3 mm sphere and read at 0.5 N, moves at least two channels by more
     than 3 noise stds of the part, and every channel moves somewhere (the cones left
@@ -522,11 +511,12 @@ def test_the_curved_sensors_have_no_blind_patch_under_the_elastic_model(name, mo
     from hydrotact.contact import parse_probe
     from hydrotact.datasets import PoseEngine, find_touchable_skin, pressing_rotation_vectors, sample_skin_points
     from hydrotact.elastic import _cache
+    from hydrotact.sensors import load_sensor
     from hydrotact.sim import make_sensor_model
 
     monkeypatch.setattr(_cache, "_solve_fields", lambda *args, **kwargs: pytest.fail("the shipped fields were not found"))
     monkeypatch.setenv("HYDROTACT_CACHE_DIR", str(tmp_path))  # no field solved before can be read
-    spec = _elastic_builtin(name)
+    spec = load_sensor(name)  # elastic barometers by default
     model = make_sensor_model(spec, num_rays=1)
     assert not model.uses_rays and model.elastic.num_barometers == 8
     skin = find_touchable_skin(spec, spec.make_mesh(check=False))

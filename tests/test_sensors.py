@@ -12,7 +12,7 @@ from helpers import box_surface
 
 from hydrotact import HydrotactError
 from hydrotact._schemas import load_schema, validate
-from hydrotact.sensors import BUILTIN_SENSORS, Part, SensorSpec, known_parts, load_sensor
+from hydrotact.sensors import BUILTIN_SENSORS, Part, SensorSpec, known_parts, load_sensor, with_receptive_fields
 from hydrotact.sensors._builtins import builtin_documents, builtin_text
 from hydrotact.sensors._inside import calc_winding_numbers, find_points_outside_surface, find_points_outside_tets
 
@@ -176,6 +176,22 @@ def test_to_json_round_trips(name, tmp_path):
     _assert_same(spec, again)
     _assert_same(spec, load_sensor(document))
     assert again.to_json() == document
+
+
+def test_a_spec_switched_to_another_barometer_model():
+    """`with_receptive_fields`: the same elastomer, layout and part, every barometer on
+    the new model (its numbers in SI units, as to_json writes them), validated as a
+    loaded file is (a bad field names the taxel's field)."""
+    pad = load_sensor("pad5x5")
+    elastic = with_receptive_fields(pad, {"kind": "elastic"})
+    assert elastic.name == "pad5x5-elastic" and elastic.taxel_field_kinds == ("elastic",) * 25
+    np.testing.assert_array_equal(elastic.taxel_positions_S, pad.taxel_positions_S)
+    np.testing.assert_array_equal(elastic.taxel_axes_S, pad.taxel_axes_S)
+    assert elastic.part == pad.part and elastic.geometry == pad.geometry
+    cones = with_receptive_fields(load_sensor("sphere8"), {"kind": "cone", "half_angle": math.radians(40.0)}, name="sphere8-cones")
+    assert cones.to_json() == load_sensor("sphere8-cones").to_json() | {"description": cones.description}
+    with pytest.raises(HydrotactError, match="receptive_field"):
+        with_receptive_fields(pad, {"kind": "cone"})  # a cone needs its half-angle
 
 
 def test_units_are_converted(tmp_path):

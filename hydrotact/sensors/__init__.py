@@ -10,4 +10,5 @@ from ._spec import (
     document_text as document_text,
     known_parts as known_parts,
     load_sensor as load_sensor,
+    with_receptive_fields as with_receptive_fields,
 )

@@ -462,3 +462,17 @@ def _outside_message(spec: SensorSpec, index: int, what: str) -> str:
 def document_text(spec: SensorSpec) -> str:
     """`spec.to_json()` as JSON text."""
     return json.dumps(spec.to_json(), indent=2) + "\n"
+
+
+def with_receptive_fields(spec: SensorSpec, field: dict, name: str | None = None) -> SensorSpec:
+    """`spec` with every barometer reading through `field` (a receptive-field entry of
+    the sensor schema in SI units, m and rad, as `spec.to_json()` writes them: e.g.
+    ``{"kind": "elastic"}`` or ``{"kind": "cone", "half_angle": math.radians(40)}``):
+    the same elastomer, layout and part, validated as a loaded spec is. `name`
+    defaults to the spec's name and the field's kind ("pad5x5-elastic"): a spec's
+    name keys its caches and outputs."""
+    document = spec.to_json()
+    document["name"] = name or f"{spec.name}-{field.get('kind', 'field')}"
+    for taxel in document["taxels"]:
+        taxel["receptive_field"] = dict(field)
+    return load_sensor(document, source=f"{spec.name} with {field.get('kind', 'other')} receptive fields")
