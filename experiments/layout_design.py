@@ -42,7 +42,8 @@ The design, datasets and models are kept under `layout_design.work/` and resume 
 the script is run again. Each finished design (its scores and layouts), each layout's
 nearest-neighbour check and each trained model's metrics are also written to
 `layout_design.runs/`, small files meant to be committed, with the settings they ran
-under: a run under the same settings reads them back instead of designing, generating
+under (and each design's finished starts, `design_NAME.partial/`, which
+`design_layout` keeps by its request): a run under the same settings reads them back instead of designing, generating
 or training again, so a long run continues on another checkout (as ablation_table1.py's
 records do).
 
@@ -128,7 +129,7 @@ def _design(spec, args, smoke: bool, work: Path, records: Path, material: dict, 
         regime = DatasetConfig(probe=args.design_probe)
     region = make_feasible_region(mesh, "inside", config.margin, config.spacing, config.max_tilt_deg, max_height)
     regular = make_regular_layout(spec, region)
-    result = design_layout(spec, config=config, regime=regime, material=material, compare={"regular": regular}, checkpoint=work / f"design_{design}.partial", progress=not smoke)
+    result = design_layout(spec, config=config, regime=regime, material=material, compare={"regular": regular}, checkpoint=records / f"design_{design}.partial", progress=not smoke)
     random_index = result.start_names.index("random 0")
     if design == "risers":
         layouts = {"designed": result.spec, "built-in": spec, "regular": _with_positions(spec, *regular, "regular")}
