@@ -120,7 +120,7 @@ def main() -> None:
     started = time.perf_counter()
     runs, timings, swing = [], {}, {}
     sensors = [name for name in args.sensors.split(",") if name]
-    trained_for_ageing = ageing_settings = None
+    trained_for_ageing = ageing_settings = ageing = None
     for sensor_name in sensors:
         sensor = load_sensor(sensor_name)
         t = time.perf_counter()
@@ -140,7 +140,8 @@ def main() -> None:
                     ageing_needs_it = sensor_name == "sphere8" and architecture == "gru" and hidden is None and binned and seed == 0
                     if ageing_needs_it:  # the ageing test's record goes with this model's dataset
                         ageing_settings = dataset_settings
-                    if (run := read_record(record, dataset_settings)) is not None and not (ageing_needs_it and read_record(records / "ageing.json", dataset_settings) is None):
+                        ageing = read_record(records / "ageing.json", ageing_settings)
+                    if (run := read_record(record, dataset_settings)) is not None and not (ageing_needs_it and ageing is None):
                         runs.append(run)
                         print(f"{sensor_name} {label} {'binned' if binned else 'plain'} seed {seed}: read back from {record}", flush=True)
                         continue
@@ -164,7 +165,6 @@ def main() -> None:
                           + ", ".join(f"{k} {v:.3g}" for k, v in result["metrics"].items()), flush=True)
                     if ageing_needs_it:
                         trained_for_ageing = (trained, dataset)
-    ageing = read_record(records / "ageing.json", ageing_settings) if ageing_settings is not None else None
     if ageing is None and trained_for_ageing is not None:
         trained, dataset = trained_for_ageing
         aged = load_dataset(_dataset(work / "sphere8_aged_dataset", "sphere8", AGED, args.events, args.smoke))
@@ -189,7 +189,7 @@ def main() -> None:
     output.mkdir(parents=True, exist_ok=True)
     write_text_atomic(output / f"{NAME}.json", json.dumps(document, indent=2) + "\n")
     summary = (f"{args.events} events per dataset, {args.seeds} seed(s), at most {args.max_epochs} epochs{' (smoke)' if args.smoke else ''}; "
-                f"{document['timings_s']['total'] / 60:.0f} min in this invocation (datasets and models read back from the work folder or the records not counted).")
+               f"{document['timings_s']['total'] / 60:.0f} min in this invocation (datasets and models read back from the work folder or the records not counted).")
     write_text_atomic(output / f"{NAME}.md", summary + " " + _markdown(table, ageing) + _swing_markdown(swing))
     if args.compare is not None and args.compare.is_file():
         other = json.loads(args.compare.read_text())

@@ -143,7 +143,7 @@ def _design(spec, args, smoke: bool, work: Path, records: Path, material: dict, 
     document = {
         "config": config.to_json(), "design_contacts_probe": regime.probe, "scores": scores, "elapsed_s": result.elapsed_s,
         "histories": [np.asarray(h).tolist() for h in result.histories], "start_names": result.start_names,
-        "layouts": {name: json.loads(document_text(layout)) for name, layout in layouts.items()},
+        "layouts": {name: layout.to_json() for name, layout in layouts.items()},
     }
     write_record(records / f"design_{design}.json", settings, document)
     return _write_sensors(document, work)
@@ -242,8 +242,7 @@ def main() -> None:
     for layout in layouts:
         config = DatasetConfig(events=args.events, **(SMOKE_REGIME if args.smoke else {}))
         # A layout's records hold for its sensor, dataset regime, material and training settings.
-        layout_digest = digest(json.dumps(json.loads(Path(sensors[layout]).read_text()), sort_keys=True))
-        settings = {"sensor": layout_digest, "dataset": config.to_json(), "material": MATERIAL, "max_epochs": args.max_epochs, "smoke": args.smoke}
+        settings = {"sensor": digest(Path(sensors[layout]).read_text()), "dataset": config.to_json(), "material": MATERIAL, "max_epochs": args.max_epochs, "smoke": args.smoke}
         models = [work / f"{layout}_gru_binned{inputs}_{seed}" for seed in range(args.seeds)]
         baselines[layout] = read_record(records / f"{layout}_neighbours.json", settings)
         kept = [read_record(records / f"{model.name}.json", settings | {"asinh_scale": args.asinh_scale}) for model in models]
