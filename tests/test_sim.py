@@ -162,3 +162,18 @@ def test_a_renamed_sensor_or_moved_barometers_compile_nothing_again(pad_model):
 
     assert float(kernel(pad_model)) != float(kernel(other))
     assert len(traces) == 1
+
+
+def test_a_press_computes_on_the_start_rung_without_climbing(pad_model, monkeypatch):
+    """The pad press needs more polygons than the ladder's bottom rung holds: a
+    simulation starts one rung up, so its first chunk compiles once, not twice."""
+    from hydrotact.sim import _host
+
+    calls = []
+    kernel = _host._chunk_response
+    monkeypatch.setattr(_host, "_chunk_response", lambda *args: calls.append(args[-1].sizes) or kernel(*args))
+    trajectory = _pad_trajectory()
+    unit, capacity = _host.compute_unit_responses(pad_model, make_cylinder_probe(2e-3), trajectory.X_SR, chunk=_host.calc_block_size(4))
+    assert calls == [_host.calc_start_capacity().sizes]
+    assert np.asarray(unit.needed)[:, 3].max() > SimCapacity().polygons  # the bottom rung would have overflowed
+    assert _host.calc_ladder_rung(capacity) == _host.calc_start_capacity()
