@@ -22,7 +22,7 @@ from hydrotact.cli import main
 from hydrotact.data import write_log
 from hydrotact.sim import FINGERTIP_SENSOR, StageSession, make_site_grid, simulate_stage_log
 from hydrotact.sysid import _press_solve as press_solve_module, compare_fit, fit_press_logs, write_press_fit_outputs
-from hydrotact.sysid._press_data import SITE_RESPONSE_SNR, site_responses
+from hydrotact.sysid._press_data import SITE_RESPONSE_SNR, find_kinks, site_responses
 from hydrotact.visco import Prony
 
 MATERIAL = Prony(jnp.asarray(150e3), jnp.asarray([18e3, 22e3]), jnp.asarray([0.5, 5.0]))
@@ -35,6 +35,11 @@ CALIBRATION = dict(
 )
 # Another session: its stage's home (the travel's zero) differs, by 0.1 mm RMS.
 HELD_OUT = dict(CALIBRATION, depth_range=(0.35e-3, 0.35e-3), hold_range=(12.0, 16.0), speed=0.5e-3, home_spread=0.1e-3)
+
+# The stage as a real rig logs it (the MTL strip's logs): its travel read on the
+# microcontroller's clock in 12.5 um motor steps, the time stamped by the PC on
+# receipt (10 ms of jitter), and presses that turn at their deepest point (no hold).
+RAW = dict(CALIBRATION, sites=SITES[:4], stamp_jitter_s=0.010, travel_step=12.5e-6, hold_range=(0.0, 0.0), rest_range=(1.0, 2.0), num_gaps=0)
 
 
 def _session(settings, seed):
@@ -142,6 +147,45 @@ def test_masked_samples_change_nothing(one_log_fit, stand_in):
     assert abs(again.taus[1].value - fit.taus[1].value) < 1e-6 * fit.taus[1].value
 
 
+@pytest.fixture(scope="module")
+def raw_log():
+    return simulate_stage_log(str(FINGERTIP_SENSOR), PROBE, MATERIAL, _session(RAW, 7), num_rays=16)
+
+
+def test_kinks_are_where_the_stage_turns_however_its_clock_jitters(raw_log):
+    """The stage's travel as a rig logs it: along a steady ramp the speed between two
+    samples swings by a quarter (motor steps, time stamps on receipt). Kinks are
+    found only where the stage starts, turns and stops (within two samples of the
+    instant), and each of those is found. (Sample by sample, every ramp and every
+    peak was masked, and no press had a sample left to measure its response.)"""
+    log, truth = raw_log
+    times = np.asarray(log.times)
+    masked = find_kinks(times, log.columns["indentation"])
+    step = float(np.median(np.diff(times)))
+    turns = [t for press in truth["presses"] for t in (press["start_s"], press["start_s"] + (press["end_s"] - press["start_s"]) / 2, press["end_s"])]
+    nearest = np.min(np.abs(times[:, None] - np.asarray(turns)[None, :]), axis=1)
+    assert np.all(nearest[masked] < 2.5 * step), times[masked & (nearest >= 2.5 * step)]
+    assert all(np.any(masked & (np.abs(times - turn) < 1.5 * step)) for turn in turns)
+    assert masked.sum() <= 4 * len(turns)  # the two samples either side of the instant, and one more on each side
+
+
+def test_raw_stage_travel_and_presses_without_a_hold_fit_with_the_lag(raw_log):
+    """Raw travel (motor steps, stamped on receipt) and presses with no hold, the lag
+    estimated: every channel that moves is fitted (no press is measured at a masked
+    peak), down to the noise, and the lag comes back. (Refused before: "no channel
+    responds to the presses in any log".)"""
+    log, truth = raw_log
+    messages = []
+    fit = fit_press_logs([log], ["raw.parquet"], terms=2, estimate_lag=True, saturation_pa=125e3, report=messages.append)
+    assert fit.channels == ("f0", "f1", "f2"), messages  # f3 is dead
+    # Not quite to the noise: a stamp 10 ms off moves the travel the model reads by
+    # ~10 um on a 1 mm/s ramp, several times the 2 Pa noise there (1.61 here; 0.94
+    # with exact stamps, the same log otherwise).
+    assert fit.converged and fit.reduced_chi_square < 2.0, fit.reduced_chi_square
+    step = float(np.median(np.diff(fit.logs[0].times)))
+    assert abs(fit.lags[0].value - truth["lag_s"]) < step / 3, fit.lags[0]
+
+
 def test_calibrate_on_three_and_compare_three(stand_in, tmp_path):
     calibration = stand_in["calibration"]
     fit = fit_press_logs([log for _, log, _ in calibration], [str(path) for path, _, _ in calibration], terms=2, estimate_lag=True)
@@ -186,6 +230,15 @@ def test_calibrate_on_three_and_compare_three(stand_in, tmp_path):
             assert 0.0 < channel["prediction_std_Pa"] < channel["noise_Pa"], (entry["source"], name, channel)
             assert channel["normalized_rms"] < 1.5, (entry["source"], name, channel)
             assert channel["r2"] > 0.95  # a channel that barely moves has an R² near its noise
+    # --tare first:S: each channel's baseline is the mean of its first S seconds (the
+    # log starts at rest; before, a NaN-padded mean made every prediction NaN, "R² 1").
+    first = compare_fit(tmp_path / "fit", held_out[:1], tmp_path / "first", tare="first:1.5", report_warning=messages.append)
+    table = pq.read_table(tmp_path / "first" / f"{held_out[0].stem}_predicted.parquet").to_pydict()
+    times = np.asarray(table["time"]) - table["time"][0]
+    for name, channel in first["logs"][0]["channels"].items():
+        rows = (times <= 1.5) & (np.asarray(table[f"{name}_compared"]) == 1)
+        np.testing.assert_allclose(np.asarray(table[f"{name}_predicted"])[times <= 1.5], np.mean(np.asarray(table[name])[rows]), rtol=1e-12)
+        assert np.isfinite(channel["rms_Pa"]) and channel["r2"] < 1.0
     # Without the home shift, the onsets are off by 65-106 µm: the prediction misses by far more.
     fixed = compare_fit(tmp_path / "fit", held_out[:1], tmp_path / "fixed", home="fit", report_warning=messages.append)
     assert fixed["logs"][0]["home_shift_m"] is None

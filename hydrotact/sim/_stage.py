@@ -9,6 +9,12 @@ microcontroller. :func:`simulate_stage_log` simulates such a session with the fu
 forward model and then gives it what real logs have (all seen in public recordings):
 
 - sampling at ~16 Hz with a jittered clock (7-20 ms) and gaps of 15-20 s;
+- optionally, the stage's position as a real rig logs it: read on the
+  microcontroller's clock and reported in whole motor steps, while the PC stamps
+  the time on receipt (`stamp_jitter_s`, `travel_step`), so that the logged speed
+  swings from sample to sample along a steady ramp;
+- optionally, presses without a hold (`hold_range` (0, 0): the stage turns at its
+  deepest point);
 - the pressures lagging the logged stage position (~0.05 s);
 - an unknown contact onset that differs per press (the skin's height under each
   site) and between sessions (the travel's zero moves);
@@ -65,7 +71,10 @@ class StageSession:
 
     **The logging**: `rate_hz` the nominal rate; `jitter_s` the clock jitter (the
     standard deviation of a step), drawn in this range; `num_gaps` gaps of
-    `gap_range` s with no samples; `lag_s` how far the pressures lag the logged stage.
+    `gap_range` s with no samples; `lag_s` how far the pressures lag the logged stage;
+    `stamp_jitter_s` the standard deviation of the delay between a sample and its
+    time stamp (the PC's receipt; 0: none), s; `travel_step` the resolution the stage
+    reports its travel in (a motor step; 0: exact), m.
 
     **The barometers**: `noise_rms` Pa; `drift_range` each channel's baseline drift
     over the file (a linear trend plus a slow wave of a period of minutes), Pa;
@@ -86,6 +95,8 @@ class StageSession:
     num_gaps: int = 1
     gap_range: tuple[float, float] = (15.0, 20.0)
     lag_s: float = 0.05
+    stamp_jitter_s: float = 0.0
+    travel_step: float = 0.0
     noise_rms: float = 2.0
     drift_range: tuple[float, float] = (300.0, 3000.0)
     overload: str | None = None
@@ -274,7 +285,13 @@ def simulate_stage_log(
     observed = np.minimum(observed, upper)
     index = np.clip(np.searchsorted(times, clock, side="right") - 1, 0, len(times) - 1)
     stage_travel = np.interp(clock, times, travel)
-    columns = {"time": clock, **{name: observed[:, c] for c, name in enumerate(channels)}}
+    if session.travel_step > 0.0:
+        stage_travel = session.travel_step * np.round(stage_travel / session.travel_step)
+    stamps = clock
+    if session.stamp_jitter_s > 0.0:  # received late by a varying delay, in order
+        stamps = np.maximum.accumulate(clock + session.stamp_jitter_s * np.abs(rng.standard_normal(len(clock))))
+        stamps = stamps + 1e-9 * np.arange(len(stamps))  # strictly increasing where two delays tie
+    columns = {"time": stamps, **{name: observed[:, c] for c, name in enumerate(channels)}}
     columns.update({"indentation": stage_travel, "stage_x": sites[site_of[index], 0], "stage_y": sites[site_of[index], 1]})
     metadata = {key: value for key, value in log.metadata.items() if key not in ("barometer", "field", "num_rays")}
     metadata["rate_hz"] = float(session.rate_hz)

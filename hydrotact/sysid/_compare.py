@@ -13,8 +13,9 @@ baseline, the *tare*, which comes from the log itself:
   says are unloaded, 0.3 and 1.0 Pa on two channels. Where the model wrongly says
   no load (the third channel, whose push it cuts off at one press that truly reads
   5-15 Pa), its error moves into the tare: 4.7 Pa;
-- "first:N": the mean of each channel over the log's first N seconds (a log that
-  starts at rest and does not drift);
+- "first:N": the mean of each channel over the log's first N seconds, its samples
+  there that the model says are unloaded (a log that starts at rest and does not
+  drift: the baseline "before its first press"); a channel with none is an error;
 - "all": the baseline that best fits all samples with the law fixed — what the fit
   itself does, so a fit's own log comes back with the fit's residuals.
 
@@ -249,14 +250,27 @@ def compare_log(document, report, log, source, *, tare="no-load", home="estimate
         first = times - times[0] <= tare[1]
         if first.sum() < 1:
             raise HydrotactError(f"{source}: no samples in the first {tare[1]:g} s to tare on")
-        used = mask & first[:, None]
-        baseline = np.broadcast_to(np.mean(np.where(used, observed, np.nan), axis=0)[None, :], observed.shape)
+        used = mask & first[:, None] & (elastic == 0.0)  # its no-load samples there
+        for c in np.flatnonzero(~used.any(axis=0)):
+            raise HydrotactError(
+                f"{source}: channel {channels[c]!r} has no unloaded, unmasked sample in the log's first {tare[1]:g} s to tare on "
+                f"(--tare first:{tare[1]:g}): take more seconds, or --tare no-load"
+            )
+        baseline = np.broadcast_to((np.sum(np.where(used, observed, 0.0), axis=0) / used.sum(axis=0))[None, :], observed.shape)
         tare_basis = np.ones((len(times), 1))
     else:
         used = mask if tare == "all" else mask & (elastic == 0.0)
         baseline = basis @ _solve_baseline(basis, observed, elastic, used)
         tare_basis = basis
     predicted = baseline + elastic
+    for c, name in enumerate(channels):
+        bad = mask[:, c] & ~np.isfinite(predicted[:, c])
+        if bad.any():
+            row = int(np.flatnonzero(bad)[0])
+            raise HydrotactError(
+                f"{source}: channel {name!r}: the prediction is not finite at {int(bad.sum())} of its samples "
+                f"(first at row {row + 1}, t = {times[row] - times[0]:.3g} s): nothing compared"
+            )
     band = _tare_variance(tare_basis, used, noise)
     if covariance is not None:
         band = band + _parameter_variance(by_q, by_shift, shift_var, covariance, bases, touching, elastic, basis if tare == "all" else None, mask)
@@ -270,7 +284,7 @@ def compare_log(document, report, log, source, *, tare="no-load", home="estimate
         error = np.where(mask, observed - predicted, np.nan)
         rms = np.sqrt(np.nanmean(error**2, axis=0))
         spread = np.nansum((np.where(mask, observed, np.nan) - np.nanmean(np.where(mask, observed, np.nan), axis=0)) ** 2, axis=0)
-        r2 = 1.0 - np.nansum(error**2, axis=0) / np.maximum(spread, 1e-300)
+        r2 = np.where(mask.any(axis=0), 1.0 - np.nansum(error**2, axis=0) / np.maximum(spread, 1e-300), np.nan)  # nothing compared: n/a, not 1
         shaped = np.full(error.shape, np.nan)
         for p in range(kept.num_presses):
             rows = hold == p

@@ -25,6 +25,7 @@ SITE_RESPONSE_SNR = 3.0  # a channel's law at a site is fitted where it moves th
 FLAT_TOP_SAMPLES = 3  # a channel's maximum held this many times is its clip level
 MIN_SAMPLES = 8  # a log shorter than this holds no press to fit
 KINK_FRACTION = 0.3  # a change of the stage's speed above this of its top speed is a kink
+KINK_WINDOW = 3  # samples on each side over which the stage's speed is measured for kinks
 
 
 def drift_basis(times, drift) -> np.ndarray:
@@ -89,15 +90,31 @@ def find_kinks(times, travel, reach: int = 1) -> np.ndarray:
     Between two samples of a log the stage's path is unknown; across a kink, the
     travel a lagged pressure saw (interpolated between the samples) is off by up to a
     quarter of a step's travel — at 1 mm/s and 16 Hz, 15 um or tens of Pa. Such
-    samples are masked."""
+    samples are masked.
+
+    The speed is measured over KINK_WINDOW samples on each side, and a kink is where
+    its change peaks: a real stage logs its position on its own clock and the PC
+    stamps the time on receipt (7-20 ms of jitter at 16 Hz), and it reports its
+    position in steps, so the speed between two adjacent samples swings by a quarter
+    along a steady ramp, which a sample-to-sample test reads as a kink at every
+    sample (and then masks every ramp and every peak)."""
     times, travel = np.asarray(times, dtype=np.float64), np.asarray(travel, dtype=np.float64)
-    if len(travel) < 3:
-        return np.zeros(len(travel), dtype=bool)
-    speed = np.diff(travel) / np.maximum(np.diff(times), 1e-12)
-    top = np.percentile(np.abs(speed), 99)
-    kink = np.zeros(len(travel), dtype=bool)
+    count = len(travel)
+    if count < 3:
+        return np.zeros(count, dtype=bool)
+    index = np.arange(count)
+    low, high = np.maximum(index - KINK_WINDOW, 0), np.minimum(index + KINK_WINDOW, count - 1)
+    before = (travel - travel[low]) / np.maximum(times - times[low], 1e-12)
+    after = (travel[high] - travel) / np.maximum(times[high] - times, 1e-12)
+    top = np.percentile(np.abs(after), 99)
+    change = np.abs(after - before)
+    kink = np.zeros(count, dtype=bool)
     if top > 0.0:
-        kink[1:-1] = np.abs(np.diff(speed)) > KINK_FRACTION * top
+        padded = np.concatenate([[-np.inf], change, [-np.inf]])
+        peak = np.flatnonzero((change >= padded[:-2]) & (change >= padded[2:]) & (change > KINK_FRACTION * top))
+        # The kink lies between its peak sample and the larger of that one's neighbours.
+        kink[peak] = True
+        kink[np.clip(np.where(padded[peak + 2] > padded[peak], peak + 1, peak - 1), 0, count - 1)] = True
     near = kink.copy()
     for shift in range(1, reach + 1):
         near[shift:] |= kink[:-shift]
@@ -162,19 +179,29 @@ def _responses(observed, travel, times, presses, noise) -> np.ndarray:
     masked as kinks, so no fixed few samples will do) against the line through the
     levels just before and just after the press (the baseline drifts: over a 20 s
     hold by more than a far channel's step). `observed` holds NaN where masked.
-    Presses that began in a gap count 0; a channel masked over a whole hold (clipped)
-    is NaN: unknown."""
+    A press without a hold (or one masked over its hold) is measured at the deepest
+    samples the channel has. Presses that began in a gap count 0; a channel masked
+    over a whole press (clipped through it) is NaN: unknown (the channel test counts it
+    as a response where the channel clipped in the press and not just before it)."""
     out = np.zeros((presses.num_presses, observed.shape[1]))
     for p, (start, end) in enumerate(zip(presses.starts, presses.ends)):
         if presses.unseen[p]:
             continue
         before = _level(observed[max(start - 4, 0) : max(start, 1)])
         after = _level(observed[min(end, len(observed) - 1) : end + 4])
+        before, after = np.where(np.isnan(before), after, before), np.where(np.isnan(after), before, after)  # a press at the log's end
         deep = start + np.flatnonzero(travel[start:end] >= travel[start] + 0.95 * (np.max(travel[start:end]) - travel[start]))
         fraction = (np.mean(deep) - (start - 1)) / max(end - start + 1, 1)
         if np.any(np.diff(times[int(deep[-1]) : end + 4]) > GAP_FACTOR * np.median(np.diff(times))):
             fraction = 0.0  # the press's end fell into a gap: its level after is minutes of drift away
-        out[p] = np.abs(_level(observed[deep]) - (before + fraction * (after - before))) / noise
+        level = _level(observed[deep])
+        # A press without a hold peaks at a kink, masked: its level is then that of
+        # the deepest samples the channel has (the response test uses what it has).
+        for c in np.flatnonzero(np.isnan(level)):
+            rows = start + np.flatnonzero(np.isfinite(observed[start:end, c]))
+            if rows.size:
+                level[c] = np.median(observed[rows[np.argsort(travel[rows])[-3:]], c])
+        out[p] = np.abs(level - (before + fraction * (after - before))) / noise
     return out
 
 
@@ -284,7 +311,9 @@ def prepare_press_logs(
         noise = np.array([estimate_noise(observed[~masked[:, c], c : c + 1])[0] for c in range(observed.shape[1])])
         usable = np.where(masked, np.nan, observed)
         responses = _responses(usable, travel, np.asarray(log.times, dtype=np.float64), presses, noise)
-        log_responding = np.nan_to_num(responses, nan=0.0).max(axis=0, initial=0.0) > RESPONSE_SNR
+        # NaN: masked through a press; where it clipped there (and not just before), it moved.
+        rose = np.array([clipped[start:end].any(axis=0) & ~clipped[max(start - 4, 0) : max(start, 1)].any(axis=0) for start, end in zip(presses.starts, presses.ends)])
+        log_responding = np.where(np.isnan(responses), rose, responses > RESPONSE_SNR).any(axis=0)
         responding |= log_responding
         staged.append((log, source, presses, site_ids, observed, clipped, masked, noise, log_responding, responses))
     for c, name in enumerate(channels):
