@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import jax
+import jax.extend
 import numpy as np
 import trimesh
 
@@ -95,3 +96,27 @@ def count_compilations():
         yield compilations
     finally:
         jax.monitoring.unregister_event_duration_listener(listener)
+
+
+LAPACK_PRIMITIVES = {"lu", "triangular_solve", "cholesky", "eigh", "svd", "qr", "geqrf", "householder_product", "schur", "tridiagonal_solve", "eig", "hessenberg", "tridiagonal"}
+
+
+def batched_lapack_calls(closed_jaxpr) -> list[str]:
+    """The LAPACK primitives of a jaxpr (and every jaxpr inside it) whose matrix
+    operand carries batch axes: on the CPU, jaxlib 0.10 splits such a call over XLA's
+    thread pool and can deadlock (hydrotact._linalg). Each as 'name shape'."""
+    found = []
+
+    def walk(jaxpr):
+        for eqn in jaxpr.eqns:
+            if eqn.primitive.name in LAPACK_PRIMITIVES and eqn.invars[0].aval.ndim > 2:
+                found.append(f"{eqn.primitive.name} {eqn.invars[0].aval.shape}")
+            for value in eqn.params.values():
+                for item in value if isinstance(value, (tuple, list)) else (value,):
+                    if isinstance(item, jax.extend.core.ClosedJaxpr):
+                        walk(item.jaxpr)
+                    elif isinstance(item, jax.extend.core.Jaxpr):
+                        walk(item)
+
+    walk(closed_jaxpr.jaxpr)
+    return found

@@ -144,3 +144,41 @@ def test_every_option_of_every_command_is_documented():
             assert action.help, f"hydrotact {name} {action.option_strings[-1]} has no help text"
             longest = max(action.option_strings, key=len)
             assert longest in readme or (longest == "--output" and "-o " in readme), f"the README never names hydrotact {name} {longest}"
+
+
+def test_a_stalled_computation_ends_with_one_line_naming_what_it_waited_for(tmp_path):
+    """A command whose computation stops using the CPU (XLA's runtime waiting for a
+    wakeup that never comes, here a sleep in its place) ends after HYDROTACT_STALL_S
+    with one line and exit status 3; a busy one is left alone."""
+    import os
+    import subprocess
+    import sys
+    import time
+
+    from hydrotact._stall import StallGuard, doing
+
+    script = (
+        "import time, hydrotact.cli as cli\n"
+        "from hydrotact._stall import doing\n"
+        "def run(args):\n"
+        "    doing('the lumped fit\\'s solve (3 Prony terms, start 1 of at most 3)')\n"
+        "    time.sleep(60)\n"
+        "cli.fit.run = run\n"
+        f"raise SystemExit(cli.main(['fit', 'log.parquet', '-o', {str(tmp_path / 'out')!r}]))\n"
+    )
+    started = time.perf_counter()
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120, env=os.environ | {"HYDROTACT_STALL_S": "2"})
+    assert result.returncode == 3, result.stderr
+    assert result.stderr.count("\n") == 1 and "stuck: no CPU used for" in result.stderr and "the lumped fit's solve (3 Prony terms" in result.stderr
+    assert time.perf_counter() - started < 45
+    stalls = []
+    doing("a busy loop")
+    with StallGuard(lambda what, seconds: stalls.append(what), limit_s=0.5, poll_s=0.05):
+        end = time.perf_counter() + 1.5
+        while time.perf_counter() < end:
+            pass
+    assert stalls == []
+    with StallGuard(lambda what, seconds: stalls.append((what, seconds)), limit_s=0.5, poll_s=0.05):
+        time.sleep(1.5)
+    assert len(stalls) == 1 and stalls[0][0] == "a busy loop" and stalls[0][1] >= 0.5
+

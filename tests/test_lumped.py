@@ -6,6 +6,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from hydrotact.sysid._lumped import LAG_BOUND, ONSET_HALF_RANGE, PressLayout, calc_press_jacobian, calc_press_predictions, calc_press_residuals, press_residual_fn
 from hydrotact.sysid._press_data import drift_basis
@@ -201,3 +202,53 @@ def test_the_hand_jacobian_is_autodiffs_through_the_projection():
         # to 1e-4 (the nearly collinear powers: N is ill-conditioned); a wrong block would be off by O(1)
         np.testing.assert_allclose(np.asarray(sensitivity.inverse)[c], block, rtol=1e-3, atol=1e-6 * np.abs(block).max())
     assert np.all(np.asarray(sensitivity.inverse)[0, 4:8] == 0.0)  # channel 0's law at site 1 is fixed at 0
+
+
+CONCURRENT_SOLVES = """
+import sys, jax, jax.numpy as jnp, numpy as np
+from hydrotact import _linalg
+jax.config.update("jax_enable_x64", True)
+solve = _linalg.solve if sys.argv[1] == "hydrotact" else lambda a, b: jnp.linalg.solve(a, b[..., None])[..., 0]
+rng = np.random.default_rng(0)
+a = rng.normal(size=(8, 4, 60, 60))
+a = a @ np.swapaxes(a, -1, -2) + 60 * np.eye(60)
+b = rng.normal(size=(8, 4, 60))
+run = jax.jit(lambda a, b: [solve(a[k], b[k]) for k in range(8)])  # eight independent batched solves in one program
+for step in range(20):
+    jax.block_until_ready(run(jnp.asarray(a) + step, jnp.asarray(b)))
+print("done")
+"""
+
+
+def test_batched_solves_run_one_matrix_at_a_time_and_never_deadlock():
+    """The cause of the lumped fit that hung: jaxlib 0.10's CPU LAPACK splits a batch
+    of matrices over XLA's thread pool and blocks the pool thread that called it;
+    eight independent batched solves in one program (XLA runs them at once) leave no
+    thread to run the pieces, and the process stops for good, using no CPU. Through
+    hydrotact._linalg (one matrix at a time) the same program finishes; the fit's
+    programs hold no batched LAPACK call at all."""
+    import subprocess
+    import sys
+
+    from helpers import batched_lapack_calls
+
+    from hydrotact.sysid._lumped import solve_baselines
+
+    done = subprocess.run([sys.executable, "-c", CONCURRENT_SOLVES, "hydrotact"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and done.stdout.strip() == "done", done.stderr
+    if tuple(int(p) for p in jax.__version__.split(".")[:3]) < (0, 11, 2):  # compiled out of later jaxlibs
+        with pytest.raises(subprocess.TimeoutExpired):  # stuck, not slow: done runs in ~2 s
+            subprocess.run([sys.executable, "-c", CONCURRENT_SOLVES, "jax"], capture_output=True, text=True, timeout=20)
+    rng = np.random.default_rng(5)
+    logs = [_model_log(rng, 300, 3, 2, 2, 4.0), _model_log(rng, 300, 2, 2, 2, 4.0)]
+    layout = PressLayout(2, (3, 2), True)
+    datas = tuple(log[0] for log in logs)
+    args = (datas, tuple(jnp.asarray(log[1]) for log in logs), (0.0, 0.0))
+    x = jnp.asarray(np.concatenate([np.log([0.1, 0.2]), np.log([0.5, 5.0]), np.zeros(5), [0.1, 0.1]]))
+    programs = {
+        "jacobian": jax.make_jaxpr(lambda x: calc_press_jacobian(layout, x, args, linear=True))(x),
+        "solver's Jacobian": jax.make_jaxpr(jax.jacfwd(press_residual_fn(layout)))(x, args),
+        "baselines": jax.make_jaxpr(solve_baselines)(datas[0].baseline, datas[0].observed, datas[0].weights > 0),
+    }
+    for name, program in programs.items():
+        assert batched_lapack_calls(program) == [], name

@@ -81,3 +81,29 @@ def test_the_contact_colour_bar_starts_at_zero_and_the_camera_looks_from_minus_y
     render.render_mesh(mesh, "unused.png", title="pad")
     eye, centre, _ = (np.asarray(v) for v in caught[-1].camera_position)
     assert eye[1] < centre[1] and eye[2] < centre[2]  # from -y and below: the bonded base shows
+
+
+def test_the_lumped_fit_plots_keep_the_curve_and_the_histogram_in_view(monkeypatch):
+    """relaxation.png: a term the logs do not identify (standard error 20 x its value)
+    stays out of the band and is named, and the y axis holds the fitted curve (at
+    most 3 x its top); residuals.png: the histogram's density axis ends near its top
+    (a log axis autoscaled to 1e12 before)."""
+    from types import SimpleNamespace
+
+    import hydrotact.viz._press as press
+
+    figures = []
+    monkeypatch.setattr(press, "save_figure", lambda figure, path: figures.append(figure))
+    term = lambda value, std, identified: SimpleNamespace(value=value, std=std, identified=identified)
+    fit = SimpleNamespace(ratios=[term(0.05, 1.1, False), term(0.3, 0.05, True)], taus=[term(0.06, 4.1, False), term(0.46, 0.05, True)])
+    press._relaxation_panel(fit, "relaxation.png")
+    axis = figures[-1].axes[0]
+    low, high = axis.get_ylim()
+    fitted = 1.0 + 0.05 + 0.3  # E(0)/E∞
+    assert low <= 1.0 and fitted < high <= 3.0 * fitted
+    assert any("not identified: E1/E∞, τ1" in text.get_text() for text in axis.texts)
+    rng = np.random.default_rng(0)
+    residuals = [[(np.arange(500) * 0.01, rng.standard_normal(500) * (1 + c))] for c in range(3)]
+    press._residual_panels(["a", "b", "c"], residuals, "residuals.png", "residuals")
+    low, high = figures[-1].axes[1].get_ylim()
+    assert low == 1e-5 and 0.4 < high < 2.0

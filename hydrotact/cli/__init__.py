@@ -5,10 +5,15 @@ Each command module has `add_parser(subparsers)` (its flags, defaults and help) 
 file logic, and no stage imports this package.
 
 Every user error ends in one line, `hydrotact: error: ...`, naming the file, field or
-value at fault, and exit status 2; never a traceback.
+value at fault, and exit status 2; never a traceback. A command whose computation
+stops using the CPU for good (a stall of XLA's CPU runtime: nothing else waits so)
+ends after STALL_S seconds with one line naming what it was waiting for, and exit
+status 3 (:mod:`hydrotact._stall`); not while it waits for a Ray cluster.
 """
 
 import argparse
+import contextlib
+import os
 import re
 import sys
 import warnings
@@ -16,6 +21,7 @@ import warnings
 from .. import __version__
 from .._errors import HydrotactError, HydrotactWarning
 from .._files import cache_dir
+from .._stall import STALL_S, StallGuard, doing
 from . import compare, contact, demo, design, evaluate, export, field, fit, generate, mesh, predict, simulate, train
 
 COMMANDS = (mesh, field, contact, simulate, fit, compare, generate, train, evaluate, predict, export, design, demo)
@@ -51,8 +57,20 @@ def make_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _stalled(what: str, seconds: float) -> None:
+    print(
+        f"hydrotact: error: stuck: no CPU used for {seconds:.0f} s while {what}; XLA's CPU runtime is waiting for work that never "
+        "comes. Run the command again; if it stalls again, please report it with this line",
+        file=sys.stderr,
+        flush=True,
+    )
+    os._exit(3)
+
+
 def main(argv=None) -> int:
     args = make_parser().parse_args(argv)
+    doing(f"running hydrotact {args.command}")
+    guard = contextlib.nullcontext() if getattr(args, "ray", None) else StallGuard(_stalled, STALL_S)
     try:
         import jax
 
@@ -74,7 +92,8 @@ def main(argv=None) -> int:
                     show(message, category, *rest, **keywords)
 
             warnings.showwarning = one_line
-            args.run(args)
+            with guard:
+                args.run(args)
     except HydrotactError as error:
         print(f"hydrotact: error: {error}", file=sys.stderr)
         return 2

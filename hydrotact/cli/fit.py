@@ -46,11 +46,14 @@ def add_parser(subparsers):
     )
     parser.add_argument(
         "--starts", default="auto", metavar="auto|N",
-        help="--lumped: relaxation shapes to start from (the lowest chi2 is kept): auto (default) tries the next of 3 while a fit ends above a reduced chi2 of 1.5; N (1-3) tries the first N",
+        help=(
+            "--lumped: relaxation shapes to start from (the lowest chi2 is kept): auto (default) tries the next of 3 while the best ends above a reduced "
+            "chi2 of 1.5, and stops when two end within 1 %% of each other (one minimum: the rest is the model's misfit); N (1-3) tries the first N"
+        ),
     )
     parser.add_argument("--max-steps", type=int, metavar="N", help="solver steps before it stops (default 400; the minimisers 4000)")
     parser.add_argument("--mapping", type=Path, metavar="MAP.json", help="column mapping for logs of your own layout")
-    parser.add_argument("--terms", default="auto", metavar="N|auto", help="Prony terms, or auto (lowest BIC over 0-4; default)")
+    parser.add_argument("--terms", default="auto", metavar="N|auto", help="Prony terms, or auto (default: the lowest BIC over 0-4 terms; with --lumped, 0-3 terms, auto over 1-3)")
     parser.add_argument("--solver", default="lm", choices=["lm", "gn", "dogleg", "bfgs", "lbfgsb"], help="lm (Levenberg-Marquardt, default), gn, dogleg, bfgs or lbfgsb (jaxopt, bounded)")
     parser.add_argument("--tare", action="store_true", help="tare each log on its no-load segments first (drifting, aged sensors)")
     parser.add_argument("--field", choices=["laplace", "distance"], help="full mode: the sensor's strain field (default: the log's, else laplace)")

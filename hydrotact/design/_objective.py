@@ -62,6 +62,7 @@ import jax
 import jax.numpy as jnp
 
 from .._choices import Choice
+from .._linalg import inv, slogdet
 from .._types import Array, Bool, Float, Int
 from ..taxel import TaxelCapacity, TaxelLayout, calc_taxel_pressures
 from ._contacts import DesignContacts
@@ -159,7 +160,7 @@ def calc_prior_precision(skin_area: float, forces) -> jnp.ndarray:
 def calc_localisation_bounds(information, prior) -> jnp.ndarray:
     """The Cramér–Rao bound on each contact's RMS localisation error, m: the root of the
     trace of the (u, v) block of (I + I₀)⁻¹."""
-    covariance = jnp.linalg.inv(information + jnp.broadcast_to(prior, information.shape))
+    covariance = inv(information + jnp.broadcast_to(prior, information.shape))
     return jnp.sqrt(covariance[..., 0, 0] + covariance[..., 1, 1])
 
 
@@ -167,7 +168,7 @@ def calc_design_score(information, prior, objective: DesignObjective) -> jnp.nda
     """The score a design maximises: the mean log det(I + I₀) (`d`), or minus the mean
     squared localisation bound in mm² (`a`)."""
     if objective == DesignObjective.D:
-        return jnp.mean(jnp.linalg.slogdet(information + jnp.broadcast_to(prior, information.shape))[1])
+        return jnp.mean(slogdet(information + jnp.broadcast_to(prior, information.shape))[1])
     return -jnp.mean(calc_localisation_bounds(information, prior) ** 2) * 1e6
 
 

@@ -35,6 +35,7 @@ import lineax as lx
 import numpy as np
 
 from .._errors import HydrotactError, where
+from .._linalg import inv3
 from .._types import Array, Bool, Float, Int
 from ..field import calc_tet_gradients
 from ..field._solve import _default_rtol
@@ -235,7 +236,7 @@ def calc_reduced_system(problem: ElasticProblem, vertices, poisson_ratio, modulu
 
     diagonal = calc_diagonal_blocks(problem, vertices, poisson_ratio, modulus)
     diagonal = jnp.where(problem.is_fixed[:, None, None], eye[None], diagonal)
-    inverse = jax.lax.stop_gradient(jnp.linalg.inv(diagonal))
+    inverse = jax.lax.stop_gradient(inv3(diagonal))  # closed form: no batched LAPACK (hydrotact._linalg)
     return operator_fn, inverse, stiffness
 
 

@@ -45,6 +45,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._linalg import lu_factor, lu_solve, solve
 from ..visco import Prony
 from ._press_directions import lag_direction, make_log_terms, onset_directions, shape_directions
 from ._press_windows import PressData, calc_bases, calc_depths, log_windows
@@ -95,13 +96,12 @@ def _factor(normal):
     used = diagonal > 0.0
     scale = jnp.where(used, jnp.sqrt(jnp.where(used, diagonal, 1.0)), 1.0)  # safe to differentiate where 0
     scaled = normal / (scale[:, :, None] * scale[:, None, :]) + RIDGE * jnp.eye(normal.shape[1])[None]
-    return jax.vmap(jax.scipy.linalg.lu_factor)(scaled), scale
+    return lu_factor(scaled), scale  # one channel at a time: jaxlib's batched LAPACK can deadlock (hydrotact._linalg)
 
 
 def _apply_inverse(factors, scale, rhs):
     """N⁻¹ rhs (C, N) with the factors of :func:`_factor`."""
-    solve = jax.vmap(lambda lu, piv, b: jax.scipy.linalg.lu_solve((lu, piv), b))
-    return solve(*factors, rhs / scale) / scale
+    return lu_solve(factors, rhs / scale) / scale
 
 
 def _fitted(weighted, blocks, coefficients):
@@ -166,7 +166,7 @@ def solve_baselines(basis, targets, used):
     normal = jnp.einsum("td,tc,te->cde", basis, weights, basis)
     ridge = 1e-9 * jnp.trace(normal, axis1=1, axis2=2) / basis.shape[1]
     rhs = jnp.einsum("td,tc->cd", basis, weights * targets)
-    return jnp.linalg.solve(normal + ridge[:, None, None] * jnp.eye(basis.shape[1])[None], rhs[:, :, None])[:, :, 0]
+    return solve(normal + ridge[:, None, None] * jnp.eye(basis.shape[1])[None], rhs)
 
 
 def calc_press_residuals(shape: Prony, onsets, lags, datas):

@@ -10,6 +10,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._stall import doing
 from ._lumped import (
     LAG_BOUND,
     PressLayout,
@@ -40,6 +41,7 @@ def _press_durations(log: PressLog) -> np.ndarray:
 # at the true shape reaches 0.98.
 SHAPE_STARTS = ((1.0, 0.05), (0.3, 0.3), (3.0, 0.3))
 RESTART_REDUCED_CHI2 = 1.5  # starts="auto": a fit that ends above this is tried from the next start
+RESTART_SAME_MINIMUM = 0.01  # starts="auto": two starts whose χ² differ by less than this fraction ended in one minimum
 
 
 def _initial_x(layout: PressLayout, logs: list[PressLog], lag: float = 0.0, start: tuple[float, float] = SHAPE_STARTS[0]) -> np.ndarray:
@@ -122,21 +124,31 @@ def _own_chi_square(outputs) -> float:
     return float(sum(jnp.sum(r**2) for r in outputs[0][0]))
 
 
-def solve_press_scanned(layout: PressLayout, solver, max_steps: int, x0, args):
-    """The solve from x0, then while a scan of each site's common onset shift
-    (:func:`scan_site_onsets`) lowers the solver's χ², a re-solve from the scan's
-    best (at most ONSET_RESCANS times), kept when it lowers the model's own χ² by
-    more than ONSET_RESCAN_MIN_GAIN (times the χ² per residual, where above 1): a
-    site's onsets and its law nearly trade, and the solver alone can end with every
-    press at a site early by the same amount.
+def _solver_chi_square(layout, x, args) -> float:
+    return float(jnp.sum(press_residual_fn(layout)(x, args) ** 2))
+
+
+def _solve_from(layout: PressLayout, solver, max_steps: int, x0, args):
+    """The solve from x0, unscanned: (solution, outputs, (own χ², solver's χ²))."""
+    solution = _solve_press(layout, solver, max_steps, x0, args)
+    outputs = _press_outputs(layout, solution.value, args)
+    return solution, outputs, (_own_chi_square(outputs), _solver_chi_square(layout, solution.value, args))
+
+
+def solve_press_scanned(layout: PressLayout, solver, max_steps: int, x0, args, solved=None):
+    """The solve from x0 (or `solved`, what :func:`_solve_from` returned for it),
+    then while a scan of each site's common onset shift (:func:`scan_site_onsets`)
+    lowers the solver's χ², a re-solve from the scan's best (at most ONSET_RESCANS
+    times), kept when it lowers the model's own χ² by more than
+    ONSET_RESCAN_MIN_GAIN (times the χ² per residual, where above 1): a site's onsets
+    and its law nearly trade, and the solver alone can end with every press at a
+    site early by the same amount.
     Returns (the solution, its outputs (:func:`_press_outputs`), (its own χ², the
     solver's χ²))."""
     num_residuals = max(1, sum(int(jnp.sum(data.weights > 0.0)) for data in args[0]))
-    solver_chi_square = lambda x: float(jnp.sum(press_residual_fn(layout)(x, args) ** 2))
-    solution = _solve_press(layout, solver, max_steps, x0, args)
-    outputs = _press_outputs(layout, solution.value, args)
-    chi_square, cost = _own_chi_square(outputs), solver_chi_square(solution.value)
+    solution, outputs, (chi_square, cost) = solved if solved is not None else _solve_from(layout, solver, max_steps, x0, args)
     for _ in range(ONSET_RESCANS):
+        doing(f"the lumped fit's onset scan ({args[0][0].num_sites} sites)")
         x, scanned = scan_site_onsets(layout, solution.value, args, cost)
         if not scanned < cost * (1.0 - 1e-6):
             break
@@ -145,15 +157,21 @@ def solve_press_scanned(layout: PressLayout, solver, max_steps: int, x0, args):
         rescanned_chi_square = _own_chi_square(rescanned_outputs)
         if not rescanned_chi_square < chi_square - ONSET_RESCAN_MIN_GAIN * max(1.0, chi_square / num_residuals):
             break
-        solution, outputs, chi_square, cost = rescanned, rescanned_outputs, rescanned_chi_square, solver_chi_square(rescanned.value)
+        solution, outputs, chi_square, cost = rescanned, rescanned_outputs, rescanned_chi_square, _solver_chi_square(layout, rescanned.value, args)
     return solution, outputs, (chi_square, cost)
 
 
 def fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps, starts, num_used, num_linear):
-    """Fit `num_terms` terms from the shape starts in turn (starts "auto": until one
-    ends at a reduced χ², the model's own, below RESTART_REDUCED_CHI2; N: the first
-    N): (the lowest own χ²'s layout, args, solution, (own χ², solver's χ²), outputs,
-    the number of starts tried)."""
+    """Fit `num_terms` terms from the shape starts in turn, then scan the best one's
+    site onsets (:func:`solve_press_scanned`; once, not after every start's solve:
+    the scan evaluates every site's 25 shifts, most of a fit's time on a real log).
+    starts "auto": the next start is tried while the best own reduced χ² is above
+    RESTART_REDUCED_CHI2, unless two starts have ended within RESTART_SAME_MINIMUM of
+    each other's χ² (the same minimum from two shapes: what is left is the model's
+    misfit, which no start removes; a real log never falls below 1.5); N: the first
+    N. The best start is one that converged, if any did, with the lowest own χ².
+    Returns (the layout, args, solution, (own χ², solver's χ²), outputs, the number
+    of starts tried)."""
     layout = PressLayout(num_terms, tuple(len(log.onset_start) for log in logs), estimate_lag)
     responds = site_responses(logs, num_sites)
     datas = tuple(log.to_data(num_sites, responds) for log in logs)
@@ -161,11 +179,20 @@ def fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps, 
     dof = max(num_used - layout.size - num_linear, 1)
     best, tried = None, 0
     candidates = SHAPE_STARTS if starts == "auto" else SHAPE_STARTS[:starts]
+    ends = []
     for start in candidates if num_terms else candidates[:1]:  # no terms, no shape to start
         tried += 1
-        solution, outputs, chi_squares = solve_press_scanned(layout, solver, max_steps, jnp.asarray(_initial_x(layout, logs, lag, start)), args)
-        if best is None or chi_squares[0] < best[3][0]:
-            best = (layout, args, solution, chi_squares, outputs)
-        if starts == "auto" and best[3][0] / dof < RESTART_REDUCED_CHI2:
-            break
-    return *best, tried
+        doing(f"the lumped fit's solve ({num_terms} Prony terms, start {tried} of at most {len(candidates)})")
+        solved = _solve_from(layout, solver, max_steps, jnp.asarray(_initial_x(layout, logs, lag, start)), args)
+        ends.append(solved[2][0])
+        # A solve that converged beats one stopped at its step cap (on a flat valley of
+        # a term the logs cannot tell, still creeping), then the lower own χ².
+        if best is None or (bool(solved[0].converged), -solved[2][0]) > (bool(best[0].converged), -best[2][0]):
+            best = solved
+        if starts == "auto":
+            if best[2][0] / dof < RESTART_REDUCED_CHI2:
+                break
+            if len(ends) >= 2 and min(abs(a - b) / min(a, b) for k, a in enumerate(ends) for b in ends[:k]) < RESTART_SAME_MINIMUM:
+                break
+    solution, outputs, chi_squares = solve_press_scanned(layout, solver, max_steps, None, args, solved=best)
+    return layout, args, solution, chi_squares, outputs, tried

@@ -6,7 +6,7 @@ and named in a legend; residual histograms over their whole range.
 - `traces.png`: measured (dots) and fitted (lines) presses, per channel;
 - `residuals.png`: residuals in noise units against the time in the press, and their
   histogram against N(0, 1);
-- `relaxation.png`: the fitted E(t)/E∞ with a 95 % band from the standard errors;
+- `relaxation.png`: the fitted E(t)/E∞ with a 95 % band from the identified terms' standard errors;
 - `compare_traces.png`, `compare_residuals.png`: the same for held-out logs, the
   errors over √(noise² + the prediction band²).
 """
@@ -70,7 +70,9 @@ def _residual_panels(channels, residuals, path, title, unit="residual / noise σ
         grid = np.linspace(low, high, 400)
         right.plot(grid, np.exp(-0.5 * grid**2) / np.sqrt(2 * np.pi), "k--", lw=1.0, label="N(0, 1)")
         right.set_yscale("log")
-        right.set_ylim(bottom=1e-5)
+        # Both limits set: a step histogram's closing edges at 0 density send a log
+        # axis' autoscale to 1e12 and beyond.
+        right.set_ylim(1e-5, 2.0 * max(0.4, *(np.histogram(v[np.isfinite(v)], bins=bins, density=True)[0].max() for v in everything if np.isfinite(v).any())))
         right.set_xlabel(unit)
         right.legend(fontsize=7)
     figure.tight_layout()
@@ -99,25 +101,45 @@ def plot_press_fit(fit, out_dir) -> dict:
     _press_panels(channels, series, paths["traces_png"], f"{len(fit.logs)} log(s), {sum(len(log.onset_start) for log in fit.logs)} presses: measured and fitted, baseline off")
     _residual_panels(channels, residuals, paths["residuals_png"], f"residuals (reduced χ² = {fit.reduced_chi_square:.3f})")
 
+    _relaxation_panel(fit, paths["relaxation_png"])
+    return {name: str(path) for name, path in paths.items()}
+
+
+def _relaxation_panel(fit, path) -> None:
+    """E(t)/E∞ over the time scales the logs show, and a 95 % band drawn from the
+    identified terms' standard errors. The fit's parameters are log Eᵢ/E∞ and log τᵢ,
+    so the band is drawn in the logs (first order: σ/value, at most a factor of 20
+    either way), never as a value ± σ that crosses zero; a term the logs do not
+    identify is drawn at its value and named. The y axis covers the fitted curve and
+    the band up to 3 x the curve's top, so that the curve is never a flat line under
+    an enormous band."""
     figure, axis = new_figure(figsize=(6, 3.6))
     times = np.geomspace(1e-2, 1e3, 300)
     ratios = np.array([r.value for r in fit.ratios])
     taus = np.array([t.value for t in fit.taus])
+    spread = lambda quantities: np.array([min(q.std / max(abs(q.value), 1e-300), 3.0) if q.identified else 0.0 for q in quantities])
     rng = np.random.default_rng(0)
+    log_r, log_t = np.log(np.maximum(ratios, 1e-300)), np.log(np.maximum(taus, 1e-300))
     draws = []
     for _ in range(400):
-        r = np.abs(ratios + rng.standard_normal(len(ratios)) * [q.std for q in fit.ratios])
-        t = np.abs(taus + rng.standard_normal(len(taus)) * [q.std for q in fit.taus])
-        draws.append(1.0 + (r[None, :] * np.exp(-times[:, None] / np.maximum(t[None, :], 1e-12))).sum(axis=1))
-    axis.fill_between(times, *np.percentile(draws, [2.5, 97.5], axis=0), color="C0", alpha=0.25, label="95 % band")
-    axis.semilogx(times, 1.0 + (ratios[None, :] * np.exp(-times[:, None] / taus[None, :])).sum(axis=1), "C0", label="fitted")
+        r = np.exp(log_r + rng.standard_normal(len(ratios)) * spread(fit.ratios))
+        t = np.exp(log_t + rng.standard_normal(len(taus)) * spread(fit.taus))
+        draws.append(1.0 + (r[None, :] * np.exp(-times[:, None] / t[None, :])).sum(axis=1))
+    low, high = np.percentile(draws, [2.5, 97.5], axis=0)
+    fitted = 1.0 + (ratios[None, :] * np.exp(-times[:, None] / np.maximum(taus[None, :], 1e-300))).sum(axis=1)
+    axis.fill_between(times, low, high, color="C0", alpha=0.25, label="95 % band (identified terms)")
+    axis.semilogx(times, fitted, "C0", label="fitted")
+    top = float(fitted.max())
+    axis.set_ylim(min(0.95, float(low.min())), min(max(1.1 * top, float(high.max())), 3.0 * top))
+    unidentified = [f"E{k + 1}/E∞" for k, r in enumerate(fit.ratios) if not r.identified] + [f"τ{k + 1}" for k, t in enumerate(fit.taus) if not t.identified]
+    if unidentified:
+        axis.text(0.02, 0.04, "not identified: " + ", ".join(unidentified), transform=axis.transAxes, fontsize=7)
     axis.set_xlabel("t [s]")
     axis.set_ylabel("E(t) / E∞")
     axis.set_title("relaxation shape (lumped fit: the scale is not identified)", fontsize=9)
     axis.legend(fontsize=8)
     figure.tight_layout()
-    save_figure(figure, paths["relaxation_png"])
-    return {name: str(path) for name, path in paths.items()}
+    save_figure(figure, path)
 
 
 def _elastic_part(log, residual, prediction):
