@@ -239,6 +239,16 @@ def test_calibrate_on_three_and_compare_three(stand_in, tmp_path):
         rows = (times <= 1.5) & (np.asarray(table[f"{name}_compared"]) == 1)
         np.testing.assert_allclose(np.asarray(table[f"{name}_predicted"])[times <= 1.5], np.mean(np.asarray(table[name])[rows]), rtol=1e-12)
         assert np.isfinite(channel["rms_Pa"]) and channel["r2"] < 1.0
+    # compare_log in a float32 session computes in float64 all the same (absolute
+    # readings of ~1e5 Pa in float32 are 8 mPa apart, and its normal equations fail).
+    from hydrotact.sysid import compare_log, read_fit
+
+    document, fitted_report, covariance = read_fit(tmp_path / "fit")
+    with jax.enable_x64(False):
+        single = compare_log(document, fitted_report, stand_in["held_out"][0][1], str(held_out[0]), covariance=covariance, drift=fitted_report.get("drift"))
+    table = pq.read_table(tmp_path / "compare" / f"{held_out[0].stem}_predicted.parquet").to_pydict()
+    assert single.predicted.dtype == np.float64
+    np.testing.assert_allclose(single.predicted[:, 0], np.asarray(table[f"{single.channels[0]}_predicted"]), rtol=1e-12)
     # Without the home shift, the onsets are off by 65-106 µm: the prediction misses by far more.
     fixed = compare_fit(tmp_path / "fit", held_out[:1], tmp_path / "fixed", home="fit", report_warning=messages.append)
     assert fixed["logs"][0]["home_shift_m"] is None

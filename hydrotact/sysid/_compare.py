@@ -192,7 +192,13 @@ def _solve_baseline(basis, observed, elastic, used):
 
 def compare_log(document, report, log, source, *, tare="no-load", home="estimate", covariance=None, drift=None, saturation_pa=None, report_message=None) -> Comparison:
     """Predict one log from a fit (see the module's docstring); `covariance` the
-    channel law's (from :func:`read_fit`; None: no band)."""
+    channel law's (from :func:`read_fit`; None: no band). Computed in float64
+    whatever the caller's JAX precision (absolute readings of ~1e5 Pa to a Pa)."""
+    with jax.enable_x64(True):
+        return _compare_log(document, report, log, source, tare=tare, home=home, covariance=covariance, drift=drift, saturation_pa=saturation_pa, report_message=report_message)
+
+
+def _compare_log(document, report, log, source, *, tare, home, covariance, drift, saturation_pa, report_message) -> Comparison:
     say = report_message or (lambda message: None)
     law = document["channel_law"]
     tare = parse_tare(tare) if isinstance(tare, str) else tare
