@@ -6,7 +6,7 @@ the pieces are done. When a program runs as many batched calls at once as the po
 has threads (XLA runs independent operations concurrently), every thread waits for
 pieces that no thread is free to run, and the process stops for good, using no CPU:
 two concurrent batched `jnp.linalg.solve`s hang a 2-core machine every time
-(tests/test_sysid.py), and a lumped fit of three real stage logs hung so. (jax
+(tests/test_lumped.py), and a lumped fit of three real stage logs hung so. (jax
 0.11.2 compiles that path out; 0.10.2 is the newest on PyPI as this is written.) One
 matrix at a time runs inline on the calling thread, so these helpers map over the
 batch with `lax.map`: the same LAPACK routine per matrix, the same numbers.
@@ -22,51 +22,40 @@ import jax.numpy as jnp
 import jax.scipy.linalg as jsp_linalg
 
 
+def _each(function, batch, *arrays):
+    """function over the matrices of arrays, whose leading axes `batch` they share,
+    one at a time (`lax.map`); called directly where there is no batch."""
+    if not batch:
+        return function(*arrays)
+    out = jax.lax.map(lambda items: function(*items), tuple(x.reshape(-1, *x.shape[len(batch) :]) for x in arrays))
+    return jax.tree_util.tree_map(lambda o: o.reshape(*batch, *o.shape[1:]), out)
+
+
 def lu_factor(a):
     """`jax.scipy.linalg.lu_factor` of each matrix of a (..., n, n): (lu, pivots)."""
-    batch = a.shape[:-2]
-    if not batch:
-        return jsp_linalg.lu_factor(a)
-    lu, pivots = jax.lax.map(jsp_linalg.lu_factor, a.reshape(-1, *a.shape[-2:]))
-    return lu.reshape(a.shape), pivots.reshape(*batch, pivots.shape[-1])
+    return _each(jsp_linalg.lu_factor, a.shape[:-2], a)
 
 
 def lu_solve(factors, b):
     """`jax.scipy.linalg.lu_solve` per matrix: factors from :func:`lu_factor` of a
     (..., n, n), b (..., n) or (..., n, k) with the same batch axes."""
     lu, pivots = factors
-    batch = lu.shape[:-2]
-    if not batch:
-        return jsp_linalg.lu_solve((lu, pivots), b)
-    flat = (lu.reshape(-1, *lu.shape[-2:]), pivots.reshape(-1, pivots.shape[-1]), b.reshape(-1, *b.shape[len(batch) :]))
-    out = jax.lax.map(lambda items: jsp_linalg.lu_solve((items[0], items[1]), items[2]), flat)
-    return out.reshape(*batch, *out.shape[1:])
+    return _each(lambda lu, pivots, b: jsp_linalg.lu_solve((lu, pivots), b), lu.shape[:-2], lu, pivots, b)
 
 
 def solve(a, b):
     """`jnp.linalg.solve` per matrix: a (..., n, n), b (..., n) (one vector each)."""
-    batch = a.shape[:-2]
-    if not batch:
-        return jnp.linalg.solve(a, b)
-    out = jax.lax.map(lambda items: jnp.linalg.solve(items[0], items[1]), (a.reshape(-1, *a.shape[-2:]), b.reshape(-1, b.shape[-1])))
-    return out.reshape(*batch, b.shape[-1])
+    return _each(jnp.linalg.solve, a.shape[:-2], a, b)
 
 
 def inv(a):
     """`jnp.linalg.inv` per matrix of a (..., n, n)."""
-    batch = a.shape[:-2]
-    if not batch:
-        return jnp.linalg.inv(a)
-    return jax.lax.map(jnp.linalg.inv, a.reshape(-1, *a.shape[-2:])).reshape(a.shape)
+    return _each(jnp.linalg.inv, a.shape[:-2], a)
 
 
 def slogdet(a):
     """`jnp.linalg.slogdet` per matrix of a (..., n, n): (sign, log |det|)."""
-    batch = a.shape[:-2]
-    if not batch:
-        return jnp.linalg.slogdet(a)
-    sign, log = jax.lax.map(lambda m: tuple(jnp.linalg.slogdet(m)), a.reshape(-1, *a.shape[-2:]))
-    return sign.reshape(batch), log.reshape(batch)
+    return _each(lambda m: tuple(jnp.linalg.slogdet(m)), a.shape[:-2], a)
 
 
 def inv3(a):
