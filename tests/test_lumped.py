@@ -2,6 +2,8 @@
 projection recovers the linear parameters at the truth, misplaced onsets or lag
 show, and Levenberg-Marquardt recovers the shape, onsets and lag."""
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -147,19 +149,21 @@ def test_the_site_onset_scan_leaves_a_minimum_where_a_sites_presses_all_start_ea
     assert np.all(np.abs(np.asarray(layout.unpack(alone.value, (start,), (0.0,))[1][0]) - onsets)[::3] > 0.1e-3)  # site 0's presses
 
 
-def test_the_hand_jacobian_is_autodiffs_through_the_projection():
+@pytest.mark.parametrize("drift_from", ["unloaded", "all"])
+def test_the_hand_jacobian_is_autodiffs_through_the_projection(drift_from):
     """calc_press_jacobian (Golub-Pereyra by hand, each derivative basis integrated
     once) against JAX's forward mode through the plain model and its LU solve, for
-    two logs (shared shape, own onsets and lags) away from the truth. They agree to
-    the projection's round-off (the powers are nearly collinear: ~1e-4 of a column's
-    largest entry); a wrong term, a lost chain factor or another log's column would
-    be off by O(1). Channel 0's law at site 1 is fixed at 0 (as for a barometer that
-    does not respond there): it stays 0, and its derivative too."""
+    two logs (shared shape, own onsets and lags) away from the truth, with each
+    baseline learned out of contact (the block-triangular projection) and jointly.
+    They agree to the projection's round-off (the powers are nearly collinear: ~1e-4
+    of a column's largest entry); a wrong term, a lost chain factor or another log's
+    column would be off by O(1). Channel 0's law at site 1 is fixed at 0 (as for a
+    barometer that does not respond there): it stays 0, and its derivative too."""
     rng = np.random.default_rng(2)
     logs = [_model_log(rng, 700, 4, 3, 2, 6.0), _model_log(rng, 600, 3, 3, 2, 5.0)]
     responds = np.ones((2, 3), bool)
     responds[0, 1] = False
-    datas = tuple(eqx.tree_at(lambda data: data.responds, log[0], jnp.asarray(responds)) for log in logs)
+    datas = tuple(dataclasses.replace(eqx.tree_at(lambda data: data.responds, log[0], jnp.asarray(responds)), drift_from=drift_from) for log in logs)
     layout = PressLayout(2, (4, 3), True)
     starts = tuple(jnp.asarray(log[1] + rng.uniform(-50e-6, 50e-6, len(log[1]))) for log in logs)
     args = (datas, starts, (0.0, 0.0))

@@ -34,6 +34,11 @@ def add_parser(subparsers):
         "--drift", default="30", metavar="S|linear|none",
         help="--lumped: each channel's baseline per log: cubic B-splines with knots S seconds apart (default 30), a line, or a constant",
     )
+    parser.add_argument(
+        "--drift-from", default="all", choices=("all", "unloaded"),
+        help="--lumped: fit each baseline jointly with the laws over all samples (default), or from the samples out of contact alone "
+        "(no relaxation can pass into the drift: a check that a slow term is not drift)",
+    )
     parser.add_argument("--lag", type=number, default=0.0, metavar="S", help="--lumped: how far the pressures lag the logged stage, s (default 0; the start with --estimate-lag)")
     parser.add_argument("--estimate-lag", action="store_true", help="--lumped: fit the lag per log (within ±0.5 s)")
     parser.add_argument(
@@ -70,7 +75,7 @@ def run(args) -> None:
     press_options = None
     if args.lumped:
         press_options = {
-            "position_columns": tuple(name for name in args.position_columns.split(",") if name), "drift": parse_drift(args.drift), "lag": args.lag,
+            "position_columns": tuple(name for name in args.position_columns.split(",") if name), "drift": parse_drift(args.drift), "drift_from": args.drift_from, "lag": args.lag,
             "estimate_lag": args.estimate_lag, "saturation_pa": args.saturation, "threshold": args.press_threshold,
             "starts": parse_starts(args.starts),
         }

@@ -103,7 +103,7 @@ def fit_logs(
     `hydrotact.viz.plot_fit`; the stage draws nothing itself). `solver` is a solver
     object (default: Levenberg–Marquardt) or the name of one of SOLVERS. A `lumped`
     fit is the press model of :func:`fit_press_logs` (`press_options` its keyword
-    arguments: position_columns, drift, lag, estimate_lag, saturation_pa, threshold, starts);
+    arguments: position_columns, drift, drift_from, lag, estimate_lag, saturation_pa, threshold, starts);
     `plot` then draws a PressFit. `max_steps` caps the solver's steps. Returns the report (with `files`)."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 

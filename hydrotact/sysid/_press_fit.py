@@ -75,7 +75,7 @@ class PressFit:
     predicts), `solver_chi_square` the projection's the solver minimised (which finds
     where the push max(0, ·) is on from a pass before; the two differ by where the
     push starts or ends at the final amplitudes), `dof`, `converged`, `num_steps`,
-    `solver`, `drift`, `warnings` [str]; `num_terms`; `num_starts` the shape starts
+    `solver`, `drift`, `drift_from` (where the baselines were learned), `warnings` [str]; `num_terms`; `num_starts` the shape starts
     the fit was tried from (see SHAPE_STARTS); `law_covariance` the covariance of
     the channel law's parameters (see :func:`_law_covariance`), for `compare`'s
     prediction band.
@@ -108,6 +108,7 @@ class PressFit:
     estimate_lag: bool
     num_starts: int = 1
     law_covariance: dict | None = None
+    drift_from: str = "all"
 
     @property
     def reduced_chi_square(self) -> float:
@@ -134,6 +135,7 @@ def parse_starts(text) -> int | str:
 def fit_press_logs(
     logs, sources=None, *, terms="auto", indentation="indentation", position_columns=POSITION_COLUMNS, drift=DRIFT_KNOT_S,
     lag=0.0, estimate_lag=False, saturation_pa=None, threshold=PRESS_THRESHOLD, solver=None, max_steps=400, starts="auto", report=None,
+    drift_from="all",
 ) -> PressFit:
     """Fit the lumped press model jointly to stage logs (see the module's docstring).
 
@@ -141,7 +143,9 @@ def fit_press_logs(
     messages; `terms` Prony terms (0-3) or "auto" (lowest BIC over 1-3); `indentation`
     the stage travel column; `position_columns` the stage position columns (those a
     log lacks are ignored: then one site per press); `drift` "none", "linear" or the
-    baseline spline's knot spacing, s; `lag` the pressures' lag behind the stage, s
+    baseline spline's knot spacing, s; `drift_from` "all" (the baseline fitted jointly
+    with the laws) or "unloaded" (from the samples out of contact alone: it cannot
+    take up any relaxation; see DRIFT_FROM); `lag` the pressures' lag behind the stage, s
     (the start when `estimate_lag`); `saturation_pa` the upper reading limit (default:
     the log's part's, for absolute logs of a known sensor); `threshold` the press
     threshold (fraction of the travel's range); `solver` a least-squares solver
@@ -157,10 +161,11 @@ def fit_press_logs(
         return _fit_press_logs(
             logs, sources, terms=terms, indentation=indentation, position_columns=position_columns, drift=drift, lag=lag,
             estimate_lag=estimate_lag, saturation_pa=saturation_pa, threshold=threshold, solver=solver, max_steps=max_steps, starts=starts, report=report,
+            drift_from=drift_from,
         )
 
 
-def _fit_press_logs(logs, sources, *, terms, indentation, position_columns, drift, lag, estimate_lag, saturation_pa, threshold, solver, max_steps, starts, report):
+def _fit_press_logs(logs, sources, *, terms, indentation, position_columns, drift, lag, estimate_lag, saturation_pa, threshold, solver, max_steps, starts, report, drift_from):
     report = report or (lambda message: None)
     sources = list(sources) if sources is not None else [f"log {k + 1}" for k in range(len(logs))]
     if not logs:
@@ -176,7 +181,7 @@ def _fit_press_logs(logs, sources, *, terms, indentation, position_columns, drif
     solver = make_solver(solver or "lm") if solver is None or isinstance(solver, str) else solver
     prepared, channels, sites, skipped = prepare_press_logs(
         logs, sources, indentation=indentation, position_columns=position_columns, drift=drift, lag=lag, saturation_pa=saturation_pa,
-        threshold=threshold, report=report,
+        threshold=threshold, report=report, drift_from=drift_from,
     )
     num_used = int(sum(log.mask.sum() for log in prepared))
     num_linear = (sum(log.baseline.shape[1] for log in prepared) + len(sites) * len(POWERS)) * len(channels)
@@ -271,7 +276,7 @@ def _summarise(
         solver_chi_square=solver_chi_square, dof=dof,
         converged=converged, num_steps=int(solution.num_steps), solver=solver_name(solver), drift=drift, warnings=messages, num_terms=k,
         position_columns=tuple(position_columns), indentation=indentation, estimate_lag=estimate_lag, num_starts=num_starts,
-        law_covariance=law_covariance,
+        law_covariance=law_covariance, drift_from=logs[0].drift_from,
     )
 
 

@@ -101,6 +101,7 @@ def make_press_report(fit: PressFit) -> dict:
         "reduced_chi_square": fit.reduced_chi_square,
         "modulus_scale": "relative",
         "drift": fit.drift,
+        "drift_from": fit.drift_from,
         "prony_terms": [{"ratio": r.to_json(), "tau_s": t.to_json()} for r, t in zip(fit.ratios, fit.taus)],
         "logs": [
             {

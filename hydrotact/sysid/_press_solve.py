@@ -70,12 +70,14 @@ POLISH_PASSES = 6  # more active-set passes at the solution, for the model's own
 
 def _own_residuals(datas, bases, contact, amplitudes):
     """The model's own weighted residuals per log (T, C) for the given amplitudes
-    (the baseline + max(0, Σ A B) in contact, each log's baseline solved given them)
-    and the baselines per log (C, D)."""
+    (the baseline + max(0, Σ A B) in contact, each log's baseline solved given them,
+    over the samples out of contact where it is learned there) and the baselines per
+    log (C, D)."""
     residuals, baselines = [], []
     for data, basis, touching in zip(datas, bases, contact):
         elastic = calc_elastic(basis, touching, amplitudes)
-        coefficients = solve_baselines(data.baseline, data.observed - elastic, data.weights > 0.0)
+        used = (data.weights > 0.0) & (~touching[:, None] if data.drift_from == "unloaded" else True)
+        coefficients = solve_baselines(data.baseline, data.observed - elastic, used)
         residuals.append((data.observed - elastic - data.baseline @ coefficients.T) * data.weights)
         baselines.append(coefficients)
     return residuals, baselines
@@ -97,7 +99,7 @@ def _press_outputs(layout, x, args):
     touching = [jnp.broadcast_to(c[:, None], data.observed.shape) for c, data in zip(contact, datas)]
     for _ in range(POLISH_PASSES):
         actives = [t & (jnp.einsum("tsj,csj->tc", basis, amplitudes) > 0.0) for t, basis in zip(touching, bases)]
-        amplitudes = solve_linear(bases, datas, actives)[1]
+        amplitudes = solve_linear(bases, datas, actives, contact)[1]
         residuals, baselines = _own_residuals(datas, bases, contact, amplitudes)
         better = sum(jnp.sum(r**2, axis=0) for r in residuals) < sum(jnp.sum(r**2, axis=0) for r in best[1])  # (C,)
         best = (

@@ -31,7 +31,8 @@ class PressData(eqx.Module):
     `window_restart` (W,) whose window and where one starts; per press
     `window_last` (P,) where its window ends in the concatenation. `responds` (C, S)
     where a channel's law is fitted (elsewhere it is 0; the same for all the logs of
-    a fit).
+    a fit). `drift_from` (static) "all": each baseline is fitted jointly with the
+    amplitudes over every sample; "unloaded": from the samples out of contact alone.
     """
 
     times: Float[Array, " num_samples"]
@@ -47,9 +48,10 @@ class PressData(eqx.Module):
     window_last: Int[Array, " num_presses"]
     responds: Bool[Array, "num_channels num_sites"]
     num_sites: int = eqx.field(static=True)
+    drift_from: str = eqx.field(static=True, default="all")
 
 
-def make_press_data(times, travel, press, press_site, observed, weights, baseline, num_sites: int, responds=None) -> PressData:
+def make_press_data(times, travel, press, press_site, observed, weights, baseline, num_sites: int, responds=None, drift_from="all") -> PressData:
     """A :class:`PressData` from host arrays (as its fields; `responds` all True
     unless given), its press windows found here: press p's input is 0 outside (first − 1, last + 1) of its samples
     (linear between samples), so its hereditary integral is its window's, then a
@@ -71,6 +73,7 @@ def make_press_data(times, travel, press, press_site, observed, weights, baselin
         jnp.asarray(baseline), jnp.asarray(window), jnp.asarray(np.repeat(np.arange(num_presses), length)), jnp.asarray(restart),
         jnp.asarray(np.cumsum(length) - 1),
         jnp.asarray(np.ones((np.shape(observed)[1], num_sites), bool) if responds is None else np.asarray(responds, bool)), num_sites,
+        drift_from,
     )
 
 
