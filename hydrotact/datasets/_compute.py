@@ -19,7 +19,7 @@ alone, never on the number of devices or workers:
   function of its poses and their predictions, and a slice of easy poses is not made
   to pay for a hard one elsewhere in the batch (a tilted press near the base of a
   curved sensor can need 20x the buffers of a press on top). A pose's cost is its
-  buffers' size, not what it touches (benchmarks/RESULTS.md), and the rungs are few,
+  buffers' size, not what it touches (benchmarks/HISTORY.md), and the rungs are few,
   each compiled once: per-buffer sizes chosen freely made so many combinations that
   compiling them cost more than the small buffers saved (measured). A longer buffer
   can change a sum in its last bit (reductions over other lengths), never more.
@@ -52,7 +52,7 @@ FULL_CAPACITY = SimCapacity(tets=1024, others=1536, pairs=8192, polygons=2048, t
 """Buffers that hold most presses of a 3 mm sphere on the built-in sensors (measured),
 in the proportions such presses fill them: the taxel buffers grow fastest with depth
 (at half these taxel sizes they bound nearly every slice above the second rung, with
-the contact's buffers a quarter full; benchmarks/RESULTS.md)."""
+the contact's buffers a quarter full; benchmarks/HISTORY.md)."""
 
 CAPACITY_LADDER = tuple(SimCapacity(*(size << 2 >> k for size in FULL_CAPACITY.sizes)) for k in range(4, -1, -1))
 """The rungs a slice climbs: FULL_CAPACITY times 1/4 (a press 0.1 mm deep fits), 1/2,
