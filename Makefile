@@ -35,8 +35,7 @@ demo: $(VENV)/.installed
 # wall time says little about a file's own cost.
 # All test processes share one persistent XLA compilation cache, made anew each run
 # (locked: its size is bounded): files, notebooks and experiments compile many of the
-# same programs, and one hydrotact cache (meshes, elastic fields): the fine-tuning test
-# and the experiments' smoke run solve the same jittered sensors' fields.
+# same programs, and one hydrotact cache (meshes, elastic fields, unit responses).
 TEST_JOBS ?= 2
 TEST_LOGS := .pytest-logs
 TEST_FIRST := tests/test_contact.py tests/test_datasets.py tests/test_taxel.py tests/test_forward_model.py tests/test_notebooks_and_experiments.py tests/test_press_fit.py

@@ -49,7 +49,7 @@ _soft_soft = eqx.filter_jit(calc_soft_soft_surface)
 @eqx.filter_jit
 def _batched(kernel, bodies, poses, **options):
     """kernel(*bodies, X, **options) for each pose X, in one jitted program."""
-    return jax.vmap(lambda X: kernel(*bodies, X, **options))(poses)
+    return jax.jit(jax.vmap(lambda X: kernel(*bodies, X, **options)))(poses)
 
 
 def _ball_field(radius, num_layers, modulus=E):
@@ -364,21 +364,24 @@ def _check_jacobians(fn, args, steps, rng, skin=None):
     pressure is zero by definition, and where two skins meet (the rim of a soft-soft
     contact) both zero-pressure planes pass through the polygon corners, a genuine kink.
     """
+    # One compiled program for the values and one for the derivative serve every
+    # argument (the direction is an input, zero but for the argument checked); eagerly,
+    # each call traced and compiled the kernels' loops again.
+    def along(t, directions):
+        return fn(*(arg + t * direction for arg, direction in zip(args, directions)))
+
+    forward, derivative = jax.jit(along), jax.jit(jax.jacrev(along))
+    zeros = [jnp.zeros_like(jnp.asarray(arg)) for arg in args]
+    out = np.asarray(forward(0.0, zeros))
     for k, (arg, step) in enumerate(zip(args, steps)):
         direction = jnp.asarray(rng.normal(size=np.shape(arg)))
         if np.ndim(arg) == 0:
             direction = jnp.asarray(1.0)
         if k == 3 and skin is not None:
             direction = jnp.where(jnp.asarray(skin), 0.0, direction)
-
-        def along(t, k=k, direction=direction):
-            moved = list(args)
-            moved[k] = args[k] + t * direction
-            return fn(*moved)
-
-        out = np.asarray(fn(*args))
-        jacobian = jax.jacrev(lambda t: along(t))(0.0)
-        fd = (np.asarray(along(step)) - np.asarray(along(-step))) / (2 * step)
+        directions = [direction if j == k else zero for j, zero in enumerate(zeros)]
+        jacobian = derivative(0.0, directions)
+        fd = (np.asarray(forward(step, directions)) - np.asarray(forward(-step, directions))) / (2 * step)
         scale = np.max(np.abs(fd)) + 1e-300
         assert np.all(np.isfinite(np.asarray(jacobian)))
         np.testing.assert_allclose(np.asarray(jacobian), fd, rtol=2e-4, atol=2e-4 * scale, err_msg=f"argument {k}; value {out}")
@@ -400,14 +403,19 @@ def test_edge_cases_give_finite_values_and_gradients():
         "grazing (touching the skin)": 2e-3,
         "coplanar with a layer of tet faces": 1.5e-3,
     }
+    # Compiled once per function (the depth traced): eagerly, each call traced and
+    # compiled the kernels' loops again.
+    with_gradient = {fn: jax.jit(jax.value_and_grad(fn)) for fn in (force, half_force)}
+    values = {}
     for label, z in cases.items():
         for fn in (force, half_force):
-            value, gradient = jax.value_and_grad(fn)(z)
+            value, gradient = with_gradient[fn](jnp.asarray(z))
+            values[fn, z] = float(value)
             assert np.isfinite(float(value)) and np.isfinite(float(gradient)), (label, value, gradient)
-    assert float(force(3e-3)) == 0.0 and float(half_force(3e-3)) == 0.0
-    assert abs(float(force(2e-3))) < 1e-12  # on the skin the pressure is 0 (up to rounding)
+    assert values[force, 3e-3] == 0.0 and values[half_force, 3e-3] == 0.0
+    assert abs(values[force, 2e-3]) < 1e-12  # on the skin the pressure is 0 (up to rounding)
     # Zero rotation vector and an edge-on probe face stay finite too.
-    value, gradient = jax.value_and_grad(lambda w: force(1.8e-3, w))(jnp.zeros(3))
+    value, gradient = jax.jit(jax.value_and_grad(lambda w: force(1.8e-3, w)))(jnp.zeros(3))
     assert np.isfinite(float(value)) and np.all(np.isfinite(np.asarray(gradient)))
 
 
@@ -471,11 +479,12 @@ def test_contact_query_delegates_to_the_probe():
     mesh, field = _ball_field(5e-3, 2)
     X = make_pose([0.0, 0.0, 4.5e-3])
     probe = make_sphere_probe(3e-3)
-    by_query = calc_contact_surface(field, probe, X, Capacity(512, 512, 8192, 2048))
-    by_probe = probe.calc_contact_surface(field, X, Capacity(512, 512, 8192, 2048))
+    # compiled (eagerly, each call traced and compiled the kernels' loops again)
+    by_query = jax.jit(lambda X: calc_contact_surface(field, probe, X, Capacity(512, 512, 8192, 2048)))(X)
+    by_probe = jax.jit(lambda X: probe.calc_contact_surface(field, X, Capacity(512, 512, 8192, 2048)))(X)
     assert eqx.tree_equal(by_query, by_probe) and int(by_query.num_polygons) > 0
-    half = calc_contact_surface(field, HalfSpace(), X)
-    assert eqx.tree_equal(half, calc_half_space_surface(field, X))
+    half = jax.jit(lambda X: calc_contact_surface(field, HalfSpace(), X))(X)
+    assert eqx.tree_equal(half, jax.jit(lambda X: calc_half_space_surface(field, X))(X))
 
 
 # --- Ties: probe faces on layers of tet faces, planes on layers of vertices ----------

@@ -660,3 +660,36 @@ def test_design_moves_elastic_barometers_through_their_fields(tmp_path):
     report = json.loads((tmp_path / "designed_report.json").read_text())
     start, final = report["random_starts"][0], report["scores"]["designed"]
     assert final["score"] > start["score"], (start, final)  # a round was kept: it scored better, exactly
+
+
+def test_a_jittered_layout_solves_the_moved_ports_fields(tmp_path, monkeypatch):
+    """The dataset generator's casting tolerance (`--position-jitter`) on a sensor with
+    elastic barometers: every barometer moves, and each elastic one reads through the
+    field of its moved port, the same as a sensor built with its barometers there; an
+    unmoved layout solves nothing. (On a coarse pad with two elastic barometers: on
+    sphere8 the eight fields take minutes, so the fine-tuning tests and the
+    experiment's smoke run leave sphere8's barometers in place.)"""
+    from hydrotact.datasets._generate import _jitter_layout
+    from hydrotact.sensors import load_sensor
+    from hydrotact.sim import make_sensor_model
+
+    monkeypatch.setenv("HYDROTACT_CACHE_DIR", str(tmp_path / "cache"))
+    document = _pad_document(["elastic" if k in (6, 12) else "disk" for k in range(25)])
+    spec = load_sensor(document)
+    model = make_sensor_model(spec, num_rays=8)
+    fields = lambda: sorted((tmp_path / "cache" / "elastic_fields").glob("*.npz"))
+    solved = fields()
+    same, offsets = _jitter_layout(model, spec, 0.0, np.random.default_rng(0))
+    assert same is model and not np.any(offsets) and fields() == solved
+    # seed 1: both elastic ports move up, into the rubber (a port pushed below the
+    # board face would be outside the elastomer, which a sensor file refuses)
+    jittered, offsets = _jitter_layout(model, spec, 0.3e-3, np.random.default_rng(1))
+    assert np.all(np.abs(offsets) > 0.0) and np.all(offsets[[6, 12], 2] > 0.0)
+    assert len(fields()) == len(solved) + 2  # the two moved ports, solved
+    np.testing.assert_allclose(np.asarray(jittered.layout.positions_S), spec.taxel_positions_S + offsets, rtol=0, atol=1e-15)
+    for k in (6, 12):  # a sensor file with the elastic barometers where the jitter put them
+        document["taxels"][k]["position"] = list(np.asarray(document["taxels"][k]["position"]) + offsets[k] * 1e3)  # mm
+    moved = make_sensor_model(load_sensor(document), num_rays=8)
+    assert len(fields()) == len(solved) + 2  # the same ports: read from the cache
+    np.testing.assert_allclose(np.asarray(jittered.elastic.responses), np.asarray(moved.elastic.responses), rtol=0, atol=0)
+    assert not np.allclose(np.asarray(jittered.elastic.responses), np.asarray(model.elastic.responses))
