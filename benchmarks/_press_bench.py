@@ -22,8 +22,19 @@ loop over the samples, vectorised over terms, sites and powers), the Jacobian by
 finite differences (jac='2-point'), methods 'trf' and 'lm'. hydrotact: the jitted
 Levenberg-Marquardt with the hand-written Golub-Pereyra Jacobian; "warm" is the
 second call of `fit_press_logs` (the whole fit: preparation, solve, standard errors).
+
+The command line as a user runs it (`hydrotact fit --lumped --estimate-lag`, a fresh
+process each): "cold" with empty caches (no compiled programs, the interpreter and
+JAX imported from scratch), "second run" a fresh process once the first has filled
+hydrotact's persistent compilation cache; one log with 3 terms and with `--terms
+auto`, and three logs (three sessions, seeds seed..seed+2) calibrated together with 3
+terms. The issue's targets on the 2-core CPU: three logs in 60 s cold, one log with
+`--terms auto` in 30 s cold.
 """
 
+import os
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -188,10 +199,46 @@ def bench_press_fit(args, rows):
               f"{row['ratio_vs_warm']:.1f}x hydrotact warm", flush=True)
 
 
+def _command_line(paths, terms, output, caches):
+    """Wall time of `hydrotact fit --lumped` on `paths` in a fresh process, with its
+    caches (hydrotact's and the XLA compilation cache) in `caches`."""
+    environment = dict(os.environ, HYDROTACT_CACHE_DIR=str(caches), JAX_COMPILATION_CACHE_DIR=str(Path(caches) / "xla"))
+    command = [str(Path(sys.executable).parent / "hydrotact"), "fit", *map(str, paths), "--lumped", "--estimate-lag", "--terms", str(terms), "--output", str(output), "--json"]
+    start = time.perf_counter()
+    done = subprocess.run(command, env=environment, capture_output=True, text=True, check=False)
+    seconds = time.perf_counter() - start
+    if done.returncode != 0:
+        raise SystemExit(f"{' '.join(command)} exited {done.returncode}:\n{done.stderr[-2000:]}")
+    return seconds
+
+
+def bench_press_command_line(args, rows):
+    """Cold and second-run wall times of the command line (see the module's docstring)."""
+    cases = [("one log, 3 terms", [args.seed], 3), ("one log, --terms auto", [args.seed], "auto")]
+    if not args.smoke:
+        cases.append(("three logs, 3 terms", [args.seed, args.seed + 1, args.seed + 2], 3))
+    with tempfile.TemporaryDirectory(prefix="hydrotact-cold-") as folder:
+        for name, seeds, terms in cases:
+            paths = [standin_log(seed, args.smoke)[1] for seed in seeds]
+            caches = Path(folder) / f"caches-{len(rows)}"
+            cold = _command_line(paths, terms, Path(folder) / "fit", caches)
+            second = _command_line(paths, terms, Path(folder) / "fit", caches)
+            samples = sum(read_log(path).num_samples for path in paths)
+            rows.append({"task": "press fit, command line", "method": f"hydrotact fit --lumped ({name})", "samples": samples, "cold_s": cold, "second_run_s": second})
+            print(f"command line, {name} ({samples} samples): cold {cold:.1f} s, second run {second:.1f} s", flush=True)
+
+
 def print_press_table(rows):
     ours = next((row for row in rows if row["method"].startswith("hydrotact")), None)
     if ours is None:
         return
+    lines = [row for row in rows if row["task"] == "press fit, command line"]
+    if lines:
+        print("\nThe command line (a fresh process each; cold: empty caches):")
+        print("| command | samples | cold | second run |")
+        print("|---|---:|---:|---:|")
+        for row in lines:
+            print(f"| {row['method']} | {row['samples']} | {row['cold_s']:.1f} s | {row['second_run_s']:.1f} s |")
     print(f"\nMoving-press fit ({ours['samples']} samples, {ours['presses']} presses, {ours['parameters']} nonlinear parameters):")
     print("| method | time | steps / evaluations | chi2 | chi2 - hydrotact's | scipy / hydrotact warm | scipy / hydrotact first call |")
     print("|---|---:|---:|---:|---:|---:|---:|")

@@ -59,7 +59,7 @@ import numpy as np  # noqa: E402
 import scipy.optimize  # noqa: E402
 import scipy.signal  # noqa: E402
 from _machine import describe_machine, write_results  # noqa: E402
-from _press_bench import bench_press_fit, print_press_table  # noqa: E402
+from _press_bench import bench_press_command_line, bench_press_fit, print_press_table  # noqa: E402
 
 from hydrotact.data import BarometerLog  # noqa: E402
 from hydrotact.sensors import known_parts  # noqa: E402
@@ -455,6 +455,7 @@ def main(argv=None):
         bench_relaxation(args, relax_rows)
     if "press" in args.tasks:
         bench_press_fit(args, press_rows)
+        bench_press_command_line(args, press_rows)
     rows += log_rows + relax_rows + press_rows
     machine["load_average_end"] = _load()
     if log_rows:

@@ -162,3 +162,20 @@ def test_layout_design_smoke(tmp_path, monkeypatch):
     again = json.loads((tmp_path / "layout_design.json").read_text())
     assert json.dumps(again["table"]) == json.dumps(report["table"]) and json.dumps(again["runs"]) == json.dumps(report["runs"])
     assert not list((tmp_path / "layout_design.work").glob("*_dataset"))
+
+
+def test_mtl_calibration_refuses_a_folder_without_its_six_logs(tmp_path, monkeypatch):
+    """The real-strip experiment has no smoke run (its logs are not in the repository):
+    it names the six files it needs when they are not there, reads no other file, and
+    lays out its cases as the issue asks (6 alone, 2 groups of three, 6 left out)."""
+    (tmp_path / "logs").mkdir()
+    (tmp_path / "logs" / "zv1_zd6_t8_20230622_174706.csv").write_text("time,Sensor_0\n")
+    script = str(ROOT / "experiments" / "mtl_calibration.py")
+    monkeypatch.setattr(sys, "argv", [script, "--data", str(tmp_path), "--output", str(tmp_path / "out")])
+    with pytest.raises(SystemExit, match="the six calibration logs .* are not all in logs/"):
+        runpy.run_path(script, run_name="__main__")
+    assert not (tmp_path / "out").exists()
+    module = runpy.run_path(script)
+    cases = module["make_cases"]({"single", "group", "leave-one-out"})
+    assert [sum(kind == k for _, kind, _, _ in cases) for k in ("single", "group", "leave-one-out")] == [6, 2, 6]
+    assert all(left not in fitted and len(fitted) == 2 for _, kind, fitted, left in cases if kind == "leave-one-out")
