@@ -229,9 +229,6 @@ def bench_press_command_line(args, rows):
 
 
 def print_press_table(rows):
-    ours = next((row for row in rows if row["method"].startswith("hydrotact")), None)
-    if ours is None:
-        return
     lines = [row for row in rows if row["task"] == "press fit, command line"]
     if lines:
         print("\nThe command line (a fresh process each; cold: empty caches):")
@@ -239,6 +236,9 @@ def print_press_table(rows):
         print("|---|---:|---:|---:|")
         for row in lines:
             print(f"| {row['method']} | {row['samples']} | {row['cold_s']:.1f} s | {row['second_run_s']:.1f} s |")
+    ours = next((row for row in rows if row["task"] == "press fit" and row["method"].startswith("hydrotact")), None)
+    if ours is None:
+        return
     print(f"\nMoving-press fit ({ours['samples']} samples, {ours['presses']} presses, {ours['parameters']} nonlinear parameters):")
     print("| method | time | steps / evaluations | chi2 | chi2 - hydrotact's | scipy / hydrotact warm | scipy / hydrotact first call |")
     print("|---|---:|---:|---:|---:|---:|---:|")

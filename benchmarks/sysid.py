@@ -39,7 +39,7 @@ presses, against scipy least_squares on the same projected model): see
 benchmarks/_press_bench.py.
 
 Run: `.venv/bin/python benchmarks/sysid.py [--minutes 10 --rate 100 --channels 8
---terms 3 --seed 0] [--tasks log relaxation press] [--smoke] [--output PATH]`.
+--terms 3 --seed 0] [--tasks log relaxation press press-cli] [--smoke] [--output PATH]`.
 """
 
 import argparse
@@ -432,7 +432,8 @@ def main(argv=None):
     parser.add_argument("--relaxation-points", type=int, default=200)
     parser.add_argument("--repeats", type=int, default=5, help="repeats of the relaxation-curve timings (median)")
     parser.add_argument("--log-repeats", type=int, default=1, help="repeats of the log fit's solve-only timing (median)")
-    parser.add_argument("--tasks", nargs="+", choices=("log", "relaxation", "press"), default=["log", "relaxation", "press"])
+    parser.add_argument("--tasks", nargs="+", choices=("log", "relaxation", "press", "press-cli"), default=["log", "relaxation", "press", "press-cli"],
+                        help="press: the lumped fit in process against scipy; press-cli: its command line, cold and on a second run")
     parser.add_argument("--press-max-evaluations", type=int, default=5000, help="scipy's cap on residual evaluations in the moving-press fit")
     parser.add_argument("--smoke", action="store_true", help="a tiny fast run (30 s log at 20 Hz, 3 channels, one repeat)")
     parser.add_argument("--output", type=Path, default=None, help="JSON path (default benchmarks/results/sysid-BACKEND.json; sysid-smoke-BACKEND.json with --smoke)")
@@ -455,6 +456,7 @@ def main(argv=None):
         bench_relaxation(args, relax_rows)
     if "press" in args.tasks:
         bench_press_fit(args, press_rows)
+    if "press-cli" in args.tasks:
         bench_press_command_line(args, press_rows)
     rows += log_rows + relax_rows + press_rows
     machine["load_average_end"] = _load()
