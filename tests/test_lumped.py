@@ -237,7 +237,7 @@ def test_batched_solves_run_one_matrix_at_a_time_and_never_deadlock():
 
     from helpers import batched_lapack_calls
 
-    from hydrotact.sysid._lumped import solve_baselines
+    from hydrotact.sysid._press_projection import solve_baselines
 
     started = time.perf_counter()
     done = subprocess.run([sys.executable, "-c", CONCURRENT_SOLVES, "hydrotact"], capture_output=True, text=True, timeout=120)

@@ -51,9 +51,10 @@ import numpy as np
 
 from .._errors import HydrotactError
 from ..data import estimate_noise, read_material
-from ._lumped import ONSET_HALF_RANGE, solve_baselines
+from ._lumped import ONSET_HALF_RANGE
 from ._prediction import _estimate_home, _make_law_model, _parameter_variance, _predict, _tare_variance
 from ._press_data import DRIFT_KNOT_S, drift_basis, find_clipped, find_kinks, upper_limit
+from ._press_projection import solve_baselines
 from ._press_windows import POWERS, make_press_data
 from ._presses import SITE_TOLERANCE, find_log_presses
 from ._problem import _file_digest

@@ -38,164 +38,18 @@ The amplitudes A (shared by the logs) and the baselines' β (per log) enter line
 for given nonlinear parameters (shape, onsets, lags) they are solved per channel by
 weighted least squares inside the residual (variable projection, Golub and Pereyra),
 so the outer solver only sees the few nonlinear parameters; their Jacobian, the
-exact one of the projected problem, is written by hand (:func:`calc_press_jacobian`).
+exact one of the projected problem, is written by hand (:func:`calc_press_jacobian`);
+the inner solve is :mod:`._press_projection`'s.
 """
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._linalg import lu_factor, lu_solve, solve
 from ..visco import Prony
 from ._press_directions import lag_direction, make_log_terms, onset_directions, shape_directions
+from ._press_projection import apply_inverse, calc_elastic, find_actives, responding_columns, solve_linear, solve_linear_factored, unloaded_gram
 from ._press_windows import PressData, calc_bases, calc_depths, log_windows
-
-ACTIVE_PASSES = 2  # solves that find where the elastic part is on, before the last
-RIDGE = 1e-12  # relative to the normal matrix' diagonal: keeps an unused site's amplitude at 0
-
-
-def _assemble(bases, datas, actives, contact):
-    """The weighted columns per log [(drift (C, T, D), sites (C, T, S J), target (C,
-    T))], the block offsets, and the matrix and right-hand side (C, N, N), (C, N) of
-    the linear problem: the joint least squares' normal equations, or, with the
-    baseline learned where the skin is unloaded (PressData.drift_from "unloaded"),
-    their block lower-triangular form: the baseline's rows fitted over the samples
-    out of contact (`contact` per log (T,)) alone, with a small penalty on its
-    spline coefficients' second differences (:func:`smoothness`: a knot interval
-    that a long hold covers is bridged, not left at 0), and the amplitudes' rows
-    as before, given that baseline."""
-    sizes = [data.baseline.shape[1] for data in datas]
-    first = [sum(sizes[:k]) for k in range(len(sizes))]
-    num_baseline = sum(sizes)
-    _, num_sites, num_powers = bases[0].shape
-    num_channels = datas[0].observed.shape[1]
-    size = num_baseline + num_sites * num_powers
-    normal = jnp.zeros((num_channels, size, size), bases[0].dtype)
-    rhs = jnp.zeros((num_channels, size), bases[0].dtype)
-    weighted = []
-    for k, (basis, data, active, touching) in enumerate(zip(bases, datas, actives, contact)):
-        weights = data.weights.T  # (C, T)
-        drift = data.baseline[None, :, :] * weights[:, :, None]  # (C, T, D)
-        columns = basis.reshape(basis.shape[0], -1)  # (T, S J)
-        sites = columns[None, :, :] * (weights * active.T)[:, :, None] * _responding_columns(data, num_powers)[:, None, :]  # (C, T, S J)
-        target = data.observed.T * weights  # (C, T)
-        weighted.append((drift, sites, target))
-        low, high = first[k], first[k] + sizes[k]
-        cross = jnp.einsum("ctd,cts->cds", drift, sites)
-        normal = normal.at[:, num_baseline:, low:high].set(jnp.transpose(cross, (0, 2, 1)))
-        normal = normal.at[:, num_baseline:, num_baseline:].add(jnp.einsum("cts,ctr->csr", sites, sites))
-        rhs = rhs.at[:, num_baseline:].add(jnp.einsum("cts,ct->cs", sites, target))
-        if data.drift_from == "unloaded":
-            free = drift * (~touching)[None, :, None]
-            own = jnp.einsum("ctd,cte->cde", free, drift)
-            normal = normal.at[:, low:high, low:high].set(own + smoothness(own))
-            rhs = rhs.at[:, low:high].set(jnp.einsum("ctd,ct->cd", free, target))
-        else:
-            normal = normal.at[:, low:high, low:high].set(jnp.einsum("ctd,cte->cde", drift, drift))
-            normal = normal.at[:, low:high, num_baseline:].set(cross)
-            rhs = rhs.at[:, low:high].set(jnp.einsum("ctd,ct->cd", drift, target))
-    return weighted, (sizes, first, num_baseline), normal, rhs
-
-
-SMOOTHNESS = 1e-6  # the baseline spline's penalty on second differences, relative to its mean diagonal
-
-
-def smoothness(normal):
-    """(C, D, D) a penalty for a baseline's normal matrix (C, D, D): SMOOTHNESS of its
-    mean diagonal times Δ²ᵀΔ² (second differences of the coefficients; none for a
-    constant or a line). Against the data's own terms it is negligible; where no
-    sample reaches a B-spline (a knot interval under one long hold), the coefficients
-    there are interpolated linearly from their neighbours, not left at 0."""
-    size = normal.shape[-1]
-    second = jnp.diff(jnp.eye(size, dtype=normal.dtype), 2, axis=0)
-    mean = jnp.trace(normal, axis1=-2, axis2=-1) / size
-    return SMOOTHNESS * mean[..., None, None] * (second.T @ second)[None]
-
-
-def _responding_columns(data, num_powers):
-    """(C, S J) 1 where the channel's law at the site is fitted, 0 where it is fixed at 0."""
-    return jnp.repeat(data.responds, num_powers, axis=1).astype(data.weights.dtype)
-
-
-def _factor(normal):
-    """The Jacobi-scaled, ridged normal matrix' LU factors and the scale (C, N)."""
-    diagonal = jnp.diagonal(normal, axis1=1, axis2=2)  # 0 for a site no press of the logs reaches
-    used = diagonal > 0.0
-    scale = jnp.where(used, jnp.sqrt(jnp.where(used, diagonal, 1.0)), 1.0)  # safe to differentiate where 0
-    scaled = normal / (scale[:, :, None] * scale[:, None, :]) + RIDGE * jnp.eye(normal.shape[1])[None]
-    return lu_factor(scaled), scale  # one channel at a time: jaxlib's batched LAPACK can deadlock (hydrotact._linalg)
-
-
-def _apply_inverse(factors, scale, rhs):
-    """N⁻¹ rhs (C, N) with the factors of :func:`_factor`."""
-    return lu_solve(factors, rhs / scale) / scale
-
-
-def _fitted(weighted, blocks, coefficients):
-    """Per log (C, T): Φ g for coefficients g (C, N)."""
-    sizes, first, num_baseline = blocks
-    return [
-        jnp.einsum("ctd,cd->ct", drift, coefficients[:, first[k] : first[k] + sizes[k]]) + jnp.einsum("cts,cs->ct", sites, coefficients[:, num_baseline:])
-        for k, (drift, sites, _) in enumerate(weighted)
-    ]
-
-
-def _split(coefficients, blocks, shape):
-    sizes, first, num_baseline = blocks
-    return [coefficients[:, first[k] : first[k] + sizes[k]] for k in range(len(sizes))], coefficients[:, num_baseline:].reshape(shape)
-
-
-def solve_linear(bases, datas, actives, contact):
-    """The linear parameters given each log's bases: per channel, weighted least
-    squares over every log's baseline coefficients and the amplitudes per site and
-    power (shared by the logs), by the normal equations assembled block by block
-    (Jacobi scaled; a tiny ridge keeps what a channel never sees at 0). `actives`
-    per log (T, C): where a channel's elastic part is on (elsewhere it reads its
-    baseline); `contact` per log (T,): where the probe touches (with the baseline
-    learned where the skin is unloaded, it is fitted to the other samples only).
-
-    **Returns:** (baseline coefficients per log [(C, D_l)], amplitudes (C, S, J),
-    weighted residuals per log [(T_l, C)]).
-    """
-    drifts, amplitudes, residuals, _ = _solve_linear(bases, datas, actives, contact)
-    return drifts, amplitudes, residuals
-
-
-def _solve_linear(bases, datas, actives, contact):
-    """:func:`solve_linear`, plus what its derivative reuses: (weighted columns,
-    blocks, factors, scale)."""
-    weighted, blocks, normal, rhs = _assemble(bases, datas, actives, contact)
-    factors, scale = _factor(normal)
-    coefficients = _apply_inverse(factors, scale, rhs)
-    residuals = [(target - fitted).T for (_, _, target), fitted in zip(weighted, _fitted(weighted, blocks, coefficients))]
-    drifts, amplitudes = _split(coefficients, blocks, (normal.shape[0], *bases[0].shape[1:]))
-    return drifts, amplitudes, residuals, (weighted, blocks, factors, scale)
-
-
-def _find_actives(bases, contact, datas):
-    """Per log (T, C): where each channel's elastic part is on. The amplitudes are
-    solved over the contact, then over where that solution is positive, ACTIVE_PASSES
-    times; the set is piecewise constant in the parameters (no derivative)."""
-    frozen = [jax.lax.stop_gradient(basis) for basis in bases]
-    num_channels = datas[0].observed.shape[1]
-    touching = [jnp.broadcast_to(c[:, None], (c.shape[0], num_channels)) for c in contact]
-    actives = touching
-    for _ in range(ACTIVE_PASSES):
-        _, amplitudes, _ = solve_linear(frozen, datas, actives, contact)
-        actives = [on & (jnp.einsum("tsj,csj->tc", basis, amplitudes) > 0.0) for basis, on in zip(frozen, touching)]
-    return actives
-
-
-def solve_baselines(basis, targets, used):
-    """(C, D) each channel's baseline coefficients: least squares of targets (T, C)
-    on the basis (T, D) over the `used` samples (T, C), with the spline's smoothness
-    penalty (:func:`smoothness`: a knot interval no used sample reaches is bridged)
-    and a 1e-9 ridge relative to the normal matrix' mean diagonal."""
-    weights = used.astype(basis.dtype)
-    normal = jnp.einsum("td,tc,te->cde", basis, weights, basis)
-    ridge = 1e-9 * jnp.trace(normal, axis1=1, axis2=2) / basis.shape[1]
-    rhs = jnp.einsum("td,tc->cd", basis, weights * targets)
-    return solve(normal + smoothness(normal) + ridge[:, None, None] * jnp.eye(basis.shape[1])[None], rhs)
 
 
 def calc_press_residuals(shape: Prony, onsets, lags, datas):
@@ -219,7 +73,7 @@ def calc_press_residuals(shape: Prony, onsets, lags, datas):
         depths = calc_depths(data, onset, lag)
         bases.append(calc_bases(shape, depths, data))
         contact.append(depths > 0.0)
-    drifts, amplitudes, residuals = solve_linear(bases, datas, _find_actives(bases, contact, datas), contact)
+    drifts, amplitudes, residuals = solve_linear(bases, datas, find_actives(bases, contact, datas), contact)
     return residuals, drifts, amplitudes
 
 
@@ -232,7 +86,7 @@ def calc_press_jacobian(layout: "PressLayout", x, args, linear: bool = False):
     v = −dΦ a on the active samples, da = N⁻¹ (Φᵀ v + dΦᵀ r), dr = v − Φ da (exact for
     the normal matrix N = ΦᵀΦ; the ridge is 1e-12 of it), with one solve per
     direction with N's factors. With the baseline learned where the skin is
-    unloaded, N is the block lower-triangular matrix of :func:`_assemble` and the
+    unloaded, N is the block lower-triangular matrix of :mod:`._press_projection` and the
     baseline's part of Φᵀ v is 0 (the unloaded samples do not move with x; the
     contact set is piecewise constant in it, as the active set is). dΦ v and dΦᵀ r come from one recursion over the
     press windows (:func:`_log_windows`) and the free decays after them, never as a
@@ -247,8 +101,8 @@ def calc_press_jacobian(layout: "PressLayout", x, args, linear: bool = False):
     pieces = [log_windows(shape, onset, jnp.asarray(lag, x.dtype), data, layout.estimate_lag) for data, onset, lag in zip(datas, onsets, lags)]
     bases = [piece[0] for piece in pieces]
     contact = [piece[2] for piece in pieces]
-    actives = _find_actives(bases, contact, datas)
-    _, amplitudes, residuals, (weighted, blocks, factors, scale) = _solve_linear(bases, datas, actives, contact)
+    actives = find_actives(bases, contact, datas)
+    _, amplitudes, residuals, (weighted, blocks, factors, scale) = solve_linear_factored(bases, datas, actives, contact)
     size = layout.size
     num_channels, num_sites, num_powers = amplitudes.shape
     first_onset = 2 * k
@@ -280,8 +134,8 @@ def calc_press_jacobian(layout: "PressLayout", x, args, linear: bool = False):
         if data.drift_from != "unloaded":  # a baseline fitted out of contact does not move with x
             rhs = rhs.at[:, :, first[log] : first[log] + sizes[log]].set(jnp.einsum("ctd,mct->mcd", drift, vector))
         rhs = rhs.at[:, :, num_baseline:].add(jnp.einsum("cts,mct->mcs", sites, vector))
-    rhs = rhs.at[:, :, num_baseline:].add(extra * _responding_columns(datas[0], num_powers)[None])  # a law fixed at 0 stays there
-    step = jax.vmap(_apply_inverse, in_axes=(None, None, 0))(factors, scale, rhs)  # (M, C, N)
+    rhs = rhs.at[:, :, num_baseline:].add(extra * responding_columns(datas[0], num_powers)[None])  # a law fixed at 0 stays there
+    step = jax.vmap(apply_inverse, in_axes=(None, None, 0))(factors, scale, rhs)  # (M, C, N)
     columns = []
     for log, ((drift, sites, _), vector) in enumerate(zip(weighted, vectors)):
         fitted = jnp.einsum("ctd,mcd->mct", drift, step[:, :, first[log] : first[log] + sizes[log]]) + jnp.einsum("cts,mcs->mct", sites, step[:, :, num_baseline:])
@@ -291,7 +145,7 @@ def calc_press_jacobian(layout: "PressLayout", x, args, linear: bool = False):
         return value, jacobian
     # For the amplitudes' covariance: where each (channel, site, power) is fitted, its
     # derivative in x and its block of N⁻¹ (0 where the law is fixed at 0 or no sample reaches it).
-    fitted_columns = _responding_columns(datas[0], num_powers) * (sum(jnp.einsum("cts,cts->cs", sites, sites) for _, sites, _ in weighted) > 0.0)
+    fitted_columns = responding_columns(datas[0], num_powers) * (sum(jnp.einsum("cts,cts->cs", sites, sites) for _, sites, _ in weighted) > 0.0)
     size_linear = num_baseline + num_sites * num_powers
     identity = jnp.broadcast_to(jnp.eye(size_linear)[:, None, :], (size_linear, num_channels, size_linear))
     if datas[0].drift_from == "unloaded":
@@ -299,16 +153,15 @@ def calc_press_jacobian(layout: "PressLayout", x, args, linear: bool = False):
         # baseline's rows from the unloaded samples): their covariance is M⁻¹ Σ M⁻ᵀ,
         # Σ the right-hand side's Gram matrix, block diagonal (the sites' columns
         # are 0 out of contact): each log's unloaded baseline block and the sites'.
-        inverse = jax.vmap(_apply_inverse, in_axes=(None, None, 0))(factors, scale, identity)  # (N, C, N): column j of M⁻¹
+        inverse = jax.vmap(apply_inverse, in_axes=(None, None, 0))(factors, scale, identity)  # (N, C, N): column j of M⁻¹
         rows = jnp.transpose(inverse[:, :, num_baseline:], (1, 2, 0))  # (C, S J, N): the amplitudes' rows of M⁻¹
         amplitude_rows = rows[:, :, num_baseline:]
         amplitude_inverse = jnp.einsum("cas,csr,cbr->cab", amplitude_rows, sum(jnp.einsum("cts,ctr->csr", sites, sites) for _, sites, _ in weighted), amplitude_rows)
         for log, ((drift, _, _), touching) in enumerate(zip(weighted, contact)):
-            own = jnp.einsum("ctd,cte->cde", drift * (~touching)[None, :, None], drift)
             block = rows[:, :, first[log] : first[log] + sizes[log]]
-            amplitude_inverse = amplitude_inverse + jnp.einsum("cad,cde,cbe->cab", block, own, block)
+            amplitude_inverse = amplitude_inverse + jnp.einsum("cad,cde,cbe->cab", block, unloaded_gram(drift, touching), block)
     else:
-        inverse = jax.vmap(_apply_inverse, in_axes=(None, None, 0))(factors, scale, identity[num_baseline:])  # (S J, C, N)
+        inverse = jax.vmap(apply_inverse, in_axes=(None, None, 0))(factors, scale, identity[num_baseline:])  # (S J, C, N)
         amplitude_inverse = jnp.transpose(inverse[:, :, num_baseline:], (1, 0, 2))
     amplitude_inverse = amplitude_inverse * fitted_columns[:, :, None] * fitted_columns[:, None, :]
     sensitivity = LinearSensitivity(step[:, :, num_baseline:] * fitted_columns[None], amplitude_inverse)
@@ -325,13 +178,6 @@ class LinearSensitivity(eqx.Module):
 
     steps: jax.Array
     inverse: jax.Array
-
-
-def calc_elastic(bases, touching, amplitudes):
-    """(T, C) the elastic part of the readings, for bases (T, S, J) and amplitudes
-    (C, S, J): max(0, Σ A B) where the probe touches (`touching` (T,)), 0 elsewhere
-    (the skin pushes on a barometer but never pulls)."""
-    return jnp.where(touching[:, None], jnp.maximum(jnp.einsum("tsj,csj->tc", bases, amplitudes), 0.0), 0.0)
 
 
 def calc_press_predictions(shape: Prony, onsets, lag, baseline_coefficients, amplitudes, data: PressData):

@@ -9,7 +9,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..visco import Prony
-from ._lumped import ONSET_HALF_RANGE, calc_elastic, solve_baselines
+from ._lumped import ONSET_HALF_RANGE
+from ._press_projection import calc_elastic, solve_baselines
 from ._press_windows import PressData, calc_bases, calc_depths
 from ._solve import make_solver, solve_least_squares
 

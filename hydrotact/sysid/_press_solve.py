@@ -11,17 +11,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._stall import doing
-from ._lumped import (
-    LAG_BOUND,
-    PressLayout,
-    calc_elastic,
-    calc_press_jacobian,
-    press_residual_fn,
-    scan_site_onsets,
-    solve_baselines,
-    solve_linear,
-)
+from ._lumped import LAG_BOUND, PressLayout, calc_press_jacobian, press_residual_fn, scan_site_onsets
 from ._press_data import PressLog, site_responses
+from ._press_projection import calc_elastic, solve_baselines, solve_linear
 from ._solve import solve_least_squares
 
 
