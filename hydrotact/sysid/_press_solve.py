@@ -158,7 +158,7 @@ def solve_press_scanned(layout: PressLayout, solver, max_steps: int, x0, args, s
 def fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps, starts, num_used, num_linear):
     """Fit `num_terms` terms from the shape starts in turn, then scan the best one's
     site onsets (:func:`solve_press_scanned`; once, not after every start's solve:
-    the scan evaluates every site's 25 shifts, most of a fit's time on a real log).
+    the scan judges every site's 25 shifts).
     starts "auto": the next start is tried while the best own reduced χ² is above
     RESTART_REDUCED_CHI2, unless two starts have ended within RESTART_SAME_MINIMUM of
     each other's χ² (the same minimum from two shapes: what is left is the model's
