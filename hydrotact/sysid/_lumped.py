@@ -337,8 +337,8 @@ def scan_site_onsets(layout: PressLayout, x, args, cost=None, offsets=ONSET_SCAN
     more), and the scan's lowest minima (:func:`_lowest_minima`) by the whole
     projection: the best kept where it lowers the solver's χ². On the full-size
     stand-in (20 sites, 25 shifts) this is at most 3 whole projections per site
-    instead of 25. The shifts run one at a
-    time (lax.map: a long log's bases are not held 25 times over)."""
+    instead of 25. The shifts run one at a time (lax.map: a long log's bases are
+    not held 25 times over)."""
     offsets = jnp.asarray(offsets, x.dtype)
     unmoved = int(jnp.argmin(jnp.abs(offsets)))
     at_x, projection = _projection(layout, x, args)
