@@ -326,10 +326,10 @@ def _projection(layout: PressLayout, x, args):
     return sum(jnp.sum(r**2) for r in residuals), (amplitudes, actives, contact)
 
 
-def scan_site_onsets(layout: PressLayout, x, args, cost=None, offsets=ONSET_SCAN):
+def scan_site_onsets(layout: PressLayout, x, args, offsets=ONSET_SCAN):
     """One pass over the sites: each site's onsets moved together by the shift of
     `offsets` that lowers the solver's χ² most, the others held (the earlier sites
-    at their new shifts). `cost` the solver's χ² at x, if known. Returns (x, its χ²);
+    at their new shifts). Returns (x, its χ²);
     x unchanged where no shift lowers it.
     A shift at one site changes that site's bases alone, so each shift is judged by
     the χ² with that site's law and the baselines refitted and the rest held
@@ -341,8 +341,8 @@ def scan_site_onsets(layout: PressLayout, x, args, cost=None, offsets=ONSET_SCAN
     not held 25 times over)."""
     offsets = jnp.asarray(offsets, x.dtype)
     unmoved = int(jnp.argmin(jnp.abs(offsets)))
-    at_x, projection = _projection(layout, x, args)
-    best = float(at_x) if cost is None else float(cost)
+    at_x, projection = _projection(layout, x, args)  # what the scan holds, with the solver's χ² at x
+    best = float(at_x)
     for site in range(args[0][0].num_sites):
         costs = np.asarray(_site_scan(layout, x, args, jnp.asarray(site), offsets, projection))
         site_best = (best, x, projection)
