@@ -13,7 +13,7 @@ import pytest
 from hydrotact.sysid._lumped import LAG_BOUND, ONSET_HALF_RANGE, PressLayout, calc_press_jacobian, calc_press_predictions, calc_press_residuals, press_residual_fn
 from hydrotact.sysid._press_data import drift_basis
 from hydrotact.sysid._press_solve import solve_press_scanned
-from hydrotact.sysid._press_windows import DEPTH_SCALE, POWERS, calc_bases, calc_depths, make_press_data
+from hydrotact.sysid._press_windows import CONTINUATION_POWER, DEPTH_SCALE, POWERS, _law_inputs, calc_bases, calc_depths, make_press_data
 from hydrotact.sysid._solve import solve_least_squares
 from hydrotact.visco import Prony, calc_hereditary_integral
 
@@ -82,6 +82,30 @@ def test_press_windows_give_the_integral_of_the_site_split_law():
     np.testing.assert_allclose(np.asarray(calc_bases(SHAPE, depths, data)), np.asarray(expected), rtol=0, atol=1e-13 * float(jnp.max(jnp.abs(expected))))
     assert float(jnp.max(expected[22:30, 1])) < 0.0 and float(jnp.max(expected[40:, 1])) < 0.0  # site 1 recovers after each press
     assert float(jnp.max(jnp.abs(expected[:, 2]))) == 0.0  # site 2 saw only the press without samples
+    # Past each site's reach (the deepest depth its laws were fitted to), every power
+    # goes on as its value there times (δ/reach)^CONTINUATION_POWER; within, as fitted.
+    reach = jnp.asarray([0.5e-3, 0.3e-3, 2e-3])
+    site = np.asarray(sites)[np.maximum(np.asarray(data.press), 0)]
+    limit = np.where(np.asarray(data.press) >= 0, np.asarray(reach)[site], 0.0)
+    plain = np.asarray(depths)
+    assert (plain > limit).sum() >= 10 and ((plain > 0) & (plain <= limit)).sum() >= 10  # both sides are tried
+    held = np.minimum(plain, limit)
+    continued = np.where(plain > limit, (plain / np.where(plain > limit, limit, 1.0)) ** CONTINUATION_POWER, 1.0)
+    law = np.where(plain[:, None] > 0, (held / DEPTH_SCALE)[:, None] ** np.asarray(POWERS)[None, :] * continued[:, None], 0.0)
+    expected = calc_hereditary_integral(SHAPE, data.times, inputs[:, :, None] * jnp.asarray(law)[:, None, :])
+    np.testing.assert_allclose(np.asarray(calc_bases(SHAPE, depths, data, reach)), np.asarray(expected), rtol=0, atol=1e-13 * float(jnp.max(jnp.abs(expected))))
+    # Continuous at the reach, and a law's sign there is its sign beyond.
+    at, past = jnp.asarray([0.3e-3, 0.3e-3 + 1e-12]), jnp.asarray([0.3e-3, 0.6e-3])
+    one = make_press_data(np.arange(2.0), np.zeros(2), np.zeros(2, int), np.array([1]), np.zeros((2, 1)), np.ones((2, 1)), np.ones((2, 1)), 3)
+    edge = _law_inputs(at, one, reach)[0][:, 1, :]
+    np.testing.assert_allclose(np.asarray(edge[1]), np.asarray(edge[0]), rtol=1e-8)
+    # 3 (δ/1 mm)^1.5 − 4 (δ/1 mm)^2: +0.133 at the reach, 0.3 mm; the powers go on to
+    # −0.046 at 0.6 mm, the continuation to 0.133 x 2^p.
+    cancelling = jnp.asarray([3.0, -4.0, 0.0, 0.0])
+    values = _law_inputs(past, one, reach)[0][:, 1, :] @ cancelling
+    powers = _law_inputs(past, one)[0][:, 1, :] @ cancelling
+    assert float(powers[1]) < 0.0 < float(values[0])
+    np.testing.assert_allclose(np.asarray(values), [float(powers[0]), float(powers[0]) * 2.0**CONTINUATION_POWER], rtol=1e-12)
 
 
 def test_projection_at_the_truth_leaves_the_noise():

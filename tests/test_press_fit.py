@@ -23,6 +23,7 @@ from hydrotact.data import write_log
 from hydrotact.sim import FINGERTIP_SENSOR, StageSession, make_site_grid, simulate_stage_log
 from hydrotact.sysid import _press_solve as press_solve_module, compare_fit, fit_press_logs, write_press_fit_outputs
 from hydrotact.sysid._press_data import SITE_RESPONSE_SNR, find_kinks, site_responses
+from hydrotact.sysid._press_windows import calc_depths
 from hydrotact.visco import Prony
 
 MATERIAL = Prony(jnp.asarray(150e3), jnp.asarray([18e3, 22e3]), jnp.asarray([0.5, 5.0]))
@@ -291,6 +292,30 @@ def test_calibrate_on_three_and_compare_three(stand_in, tmp_path):
     for c, name in enumerate(fit.channels):
         error = (np.asarray(calibration[0][1].columns[name]) - np.asarray(predicted[f"{name}_predicted"])) / log.noise[c]
         np.testing.assert_allclose(np.where(log.mask[:, c], error, 0.0), fit.residuals[0][:, c], atol=1e-8)
+
+
+def test_a_press_deeper_than_any_fitted_is_predicted_past_the_laws_reach(stand_in, tmp_path):
+    """Fitted on the three held-out sessions (presses 0.35 mm past the onset), the
+    first calibration session (0.6 mm: 70 % deeper than any fitted) is predicted to
+    13-35 Pa RMS per channel (noise ~2 Pa; its relaxation and laws seen at 0.35 mm
+    only): past each site's reach, the deepest depth past their onsets its laws were
+    fitted to, they go on as their value there times (δ / reach)². With the fitted
+    sums of powers at any depth (at 7b342f9), 25, 110 and 86 Pa."""
+    shallow = stand_in["held_out"]
+    paths = [str(path) for path, _, _ in shallow]
+    fit = fit_press_logs([log for _, log, _ in shallow], paths, terms=2, estimate_lag=True)
+    write_press_fit_outputs(fit, tmp_path / "fit", paths=paths)
+    sites = json.loads((tmp_path / "fit" / "material.json").read_text())["channel_law"]["sites"]
+    reach = np.zeros(len(sites))
+    for log, onsets, lag in zip(fit.logs, fit.onsets, fit.lags):
+        depths = np.asarray(calc_depths(log.to_data(len(sites)), jnp.asarray(onsets), lag.value))
+        for s in range(len(sites)):
+            reach[s] = max(reach[s], depths[(log.press >= 0) & (log.press_site[np.maximum(log.press, 0)] == s)].max(initial=0.0))
+    np.testing.assert_allclose([site["reach_m"] for site in sites], reach, rtol=1e-12)
+    assert np.all(reach[[len(site["position_m"]) == 2 for site in sites]] > 0.3e-3)
+    result = compare_fit(tmp_path / "fit", [stand_in["calibration"][0][0]], tmp_path / "deeper", report_warning=[].append)
+    for name, channel in result["logs"][0]["channels"].items():
+        assert channel["rms_Pa"] < 40.0, (name, channel)
 
 
 def test_fit_and_compare_from_the_command_line(stand_in, tmp_path, capsys):

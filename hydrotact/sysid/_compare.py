@@ -1,7 +1,8 @@
 """Predicting held-out stage logs from a lumped press fit (`hydrotact compare`).
 
 Everything comes from the fit's `material.json` (the relative Prony series and the
-channel law: each site's onset and amplitudes per power of the depth, the lag) except each log's
+channel law: each site's onset, amplitudes per power of the depth and reach, past which
+its laws go on as their value there times (δ/reach)², the lag) except each log's
 baseline, the *tare*, which comes from the log itself:
 
 - "no-load" (default): each channel's baseline fitted to the log's samples where the

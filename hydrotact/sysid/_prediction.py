@@ -14,6 +14,7 @@ from ._press_projection import calc_elastic, solve_baselines
 from ._press_windows import PressData, calc_bases, calc_depths
 from ._solve import make_solver, solve_least_squares
 
+UNLIMITED_REACH_M = 1.0  # a law's reach where the fit recorded none: no stage press goes a metre deep
 HOME_GRID = 41  # shifts over ±ONSET_HALF_RANGE tried before the home shift is polished
 
 
@@ -29,13 +30,15 @@ def _law_prony(document) -> Prony:
 class _LawModel(eqx.Module):
     """A log's elastic part as a function of the law's parameters q (log Eᵢ/E∞, log
     τᵢ, the sites' onsets, the lag: the order of the fit's covariance), the
-    amplitudes (C, S, J) and a shift of every onset (the home's). Build it with
-    :func:`_make_law_model`."""
+    amplitudes (C, S, J) and a shift of every onset (the home's); each site's law
+    continued past its `reach` (S,) as :func:`._press_windows._law_inputs` says.
+    Build it with :func:`_make_law_model`."""
 
     data: PressData
     q: jax.Array
     press_onsets: jax.Array
     site_ids: jax.Array
+    reach: jax.Array
     long_term: float = eqx.field(static=True)
     num_terms: int = eqx.field(static=True)
 
@@ -45,17 +48,21 @@ class _LawModel(eqx.Module):
         # A fitted log's own onsets (or the sites'), moved as q moves its sites' onsets.
         onsets = self.press_onsets + (q[2 * k : 2 * k + num_sites] - self.q[2 * k : 2 * k + num_sites])[self.site_ids] + shift
         depths = calc_depths(self.data, onsets, q[-1])
-        bases = calc_bases(shape, depths, self.data)
+        bases = calc_bases(shape, depths, self.data, self.reach)
         elastic = calc_elastic(bases, depths > 0.0, amplitudes)
         return (elastic, bases, depths > 0.0) if with_bases else elastic
 
 
 def _make_law_model(document, data, press_onsets, site_ids, lag) -> _LawModel:
+    """The model of a log (`data`) from a fit's material document; a site without a
+    recorded reach (a fit written before it) keeps its law as fitted at any depth."""
     prony = _law_prony(document)
     long_term = float(prony.long_term_modulus)
-    site_onsets = jnp.asarray([site["onset_m"] for site in document["channel_law"]["sites"]], dtype=jnp.float64)
+    sites = document["channel_law"]["sites"]
+    site_onsets = jnp.asarray([site["onset_m"] for site in sites], dtype=jnp.float64)
+    reach = jnp.asarray([site.get("reach_m", UNLIMITED_REACH_M) for site in sites], dtype=jnp.float64)
     q = jnp.concatenate([jnp.log(prony.moduli / long_term), jnp.log(prony.taus), site_onsets, jnp.asarray([lag], dtype=jnp.float64)])
-    return _LawModel(data, q, jnp.asarray(press_onsets, dtype=jnp.float64), jnp.asarray(site_ids), long_term, len(prony.taus))
+    return _LawModel(data, q, jnp.asarray(press_onsets, dtype=jnp.float64), jnp.asarray(site_ids), reach, long_term, len(prony.taus))
 
 
 @eqx.filter_jit

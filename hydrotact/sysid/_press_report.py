@@ -43,13 +43,28 @@ def make_press_material(fit: PressFit, paths=(), name: str | None = None) -> dic
     return {key: document[key] for key in write_order if key in document}
 
 
+def law_reach(fit: PressFit) -> np.ndarray:
+    """(S,) the deepest depth each site's law was fitted to, m: the most that
+    travel(t − lag) passed its press's onset in any press at the site (masked samples
+    included: their input is in the model's memory)."""
+    reach = np.zeros(len(fit.sites))
+    for log, onsets, lag in zip(fit.logs, fit.onsets, fit.lags):
+        inside = log.press >= 0
+        travel = np.interp(log.times - lag.value, log.times, log.travel)[inside]
+        press = log.press[inside]
+        np.maximum.at(reach, log.press_site[press], np.maximum(travel - np.asarray(onsets)[press], 0.0))
+    return reach
+
+
 def channel_law(fit: PressFit) -> dict:
     """The channel law of a fit, as material.json's `channel_law`."""
     sites = []
+    reach = law_reach(fit)
     for s, position in enumerate(fit.sites):
         sites.append({
             "position_m": [float(v) for v in position] if np.all(np.isfinite(position)) else [],
             "onset_m": float(fit.site_onsets[s]),
+            "reach_m": float(reach[s]),
             "amplitudes_Pa": {name: [float(v) for v in fit.amplitudes[c, s]] for c, name in enumerate(fit.channels)},
         })
     return {

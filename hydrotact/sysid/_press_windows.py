@@ -14,6 +14,13 @@ from ..visco import Prony, calc_kernel_responses_and_derivatives
 
 DEPTH_SCALE = 1e-3  # m: δ is measured in millimetres in the law (amplitudes in Pa at 1 mm)
 POWERS = (1.5, 2.0, 2.5, 3.0)  # the law's powers of the depth (from Hertz's 1.5 up: see hydrotact.sysid._lumped)
+# How a law goes on past the deepest depth it was fitted to: the power of the depth a
+# sphere's contact force grows with in the hydroelastic model (Hertz's is 1.5). Past
+# a held-out press's reach, 1.5 and 2 predicted a 5 mm stand-in press (0.35 mm
+# fitted, 0.6 mm held out) to 24-43 and 21-34 Pa and the MTL strip's 6 mm log from
+# its 5 mm ones to 1,123 and 1,040 Pa pooled (1 and 3: 2,298 and 1,409 Pa; the fitted
+# powers at any depth: 25-110 Pa and 5,054 Pa).
+CONTINUATION_POWER = 2.0
 
 
 class PressData(eqx.Module):
@@ -149,24 +156,43 @@ def _site_bases(shape: Prony, inputs, windows: PressWindows, data: PressData, nu
     return shape.long_term_modulus * inputs + _to_sites(data, law, num_samples) + tails
 
 
-def calc_bases(shape: Prony, depths, data: PressData):
+def calc_bases(shape: Prony, depths, data: PressData, reach=None):
     """(T, S, J) the bases B_{s,j}: the hereditary integrals of the powers of the
-    depth, split by site (their memory runs on between presses)."""
-    inputs, _, _ = _law_inputs(depths, data)
+    depth, split by site (their memory runs on between presses); with `reach` (S,),
+    of the powers continued past it (see :func:`_law_inputs`)."""
+    inputs, _, _ = _law_inputs(depths, data, reach)
     windows = _press_windows(shape.taus, data, jnp.sum(inputs, axis=1))
     return _site_bases(shape, inputs, windows, data, inputs.shape[2])
 
 
-def _law_inputs(depths, data: PressData):
+def _law_inputs(depths, data: PressData, reach=None):
     """(T, S, J) the site-split inputs (δ/δ_ref)^p, (T, J) their derivative in δ
-    (per m), and (T, S) each sample's site."""
+    (per m), and (T, S) each sample's site.
+
+    With `reach` (S,), the deepest depth each site's law was fitted to (a held-out
+    log's presses may go deeper), each input continues past its site's reach δ_m as
+    its value there scaled as a contact force grows, (δ_m/δ_ref)^p (δ/δ_m)^p_c
+    (p_c = CONTINUATION_POWER): a law whose reading at δ_m is a hold's, the best
+    measured of its values, goes on with the sign it has there, whatever its fitted
+    powers do past their range (sums of powers of both signs, they go anywhere) or
+    their slope at its end (a tangent there follows the loading ramp's last samples,
+    and on the test stand-in extrapolated worse). The slope returned is the fit's
+    (no reach)."""
     powers = jnp.asarray(POWERS)
     positive = depths > 0.0
-    scaled = jnp.where(positive, depths / DEPTH_SCALE, 1.0)
-    law = jnp.where(positive[:, None], scaled[:, None] ** powers[None, :], 0.0)
-    slope = jnp.where(positive[:, None], powers[None, :] * scaled[:, None] ** (powers[None, :] - 1.0) / DEPTH_SCALE, 0.0)
     site = jnp.where(data.press >= 0, data.press_site[jnp.maximum(data.press, 0)], -1)
-    by_site = (site[:, None] == jnp.arange(data.num_sites)[None, :]).astype(law.dtype)  # (T, S)
+    by_site = (site[:, None] == jnp.arange(data.num_sites)[None, :]).astype(depths.dtype)  # (T, S)
+    scaled = jnp.where(positive, depths / DEPTH_SCALE, 1.0)
+    slope = jnp.where(positive[:, None], powers[None, :] * scaled[:, None] ** (powers[None, :] - 1.0) / DEPTH_SCALE, 0.0)
+    if reach is None:
+        law = scaled[:, None] ** powers[None, :]
+    else:
+        limit = by_site @ reach  # (T,) the reach of each sample's site (0 between presses)
+        beyond = positive & (depths > limit) & (limit > 0.0)
+        held = jnp.where(beyond, limit / DEPTH_SCALE, scaled)
+        ratio = jnp.where(beyond, depths / jnp.where(beyond, limit, 1.0), 1.0)
+        law = held[:, None] ** powers[None, :] * (ratio**CONTINUATION_POWER)[:, None]
+    law = jnp.where(positive[:, None], law, 0.0)
     return by_site[:, :, None] * law[:, None, :], slope, by_site
 
 
