@@ -13,7 +13,7 @@ import pytest
 from hydrotact.sysid._lumped import LAG_BOUND, ONSET_HALF_RANGE, PressLayout, calc_press_jacobian, calc_press_predictions, calc_press_residuals, press_residual_fn
 from hydrotact.sysid._press_data import drift_basis
 from hydrotact.sysid._press_solve import solve_press_scanned
-from hydrotact.sysid._press_windows import CONTINUATION_POWER, DEPTH_SCALE, POWERS, _law_inputs, calc_bases, calc_depths, make_press_data
+from hydrotact.sysid._press_windows import CONTINUATION_POWER, DEPTH_SCALE, POWERS, _law_inputs, calc_bases, calc_depths, calc_site_bases, make_press_data, window_decay
 from hydrotact.sysid._solve import solve_least_squares
 from hydrotact.visco import Prony, calc_hereditary_integral
 
@@ -82,6 +82,10 @@ def test_press_windows_give_the_integral_of_the_site_split_law():
     np.testing.assert_allclose(np.asarray(calc_bases(SHAPE, depths, data)), np.asarray(expected), rtol=0, atol=1e-13 * float(jnp.max(jnp.abs(expected))))
     assert float(jnp.max(expected[22:30, 1])) < 0.0 and float(jnp.max(expected[40:, 1])) < 0.0  # site 1 recovers after each press
     assert float(jnp.max(jnp.abs(expected[:, 2]))) == 0.0  # site 2 saw only the press without samples
+    # One site's bases alone (the onset scan's), the windows' decay given.
+    for site in range(3):
+        alone = calc_site_bases(SHAPE, depths, data, jnp.asarray(site), window_decay(SHAPE.taus, data)[0])
+        np.testing.assert_allclose(np.asarray(alone), np.asarray(expected[:, site]), rtol=0, atol=1e-13 * float(jnp.max(jnp.abs(expected))))
     # Past each site's reach (the deepest depth its laws were fitted to), every power
     # goes on as its value there times (δ/reach)^CONTINUATION_POWER; within, as fitted.
     reach = jnp.asarray([0.5e-3, 0.3e-3, 2e-3])

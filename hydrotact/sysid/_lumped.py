@@ -50,7 +50,7 @@ import numpy as np
 from ..visco import Prony
 from ._press_directions import lag_direction, make_log_terms, onset_directions, shape_directions
 from ._press_projection import ACTIVE_PASSES, apply_inverse, calc_elastic, find_actives, responding_columns, solve_linear, solve_linear_factored, unloaded_gram
-from ._press_windows import PressData, calc_bases, calc_depths, log_windows
+from ._press_windows import PressData, calc_bases, calc_depths, calc_site_bases, log_windows, window_decay
 
 
 def calc_press_residuals(shape: Prony, onsets, lags, datas):
@@ -290,7 +290,7 @@ def _site_law_cost(own, others, datas, actives, contact, site):
 @eqx.filter_jit
 def _site_scan(layout: PressLayout, x, args, site, offsets, projection):
     """Each shift's χ² with the site's law and the baselines refitted to it, the other
-    sites' laws held at the projection's at x (`projection`: :func:`_projection`'s
+    sites' laws held at the projection's at x (`projection`: :func:`projection_at`'s
     amplitudes, actives and contact), each channel's elastic part on where it was at
     x and, where a shift brings a sample into contact, where the laws at x push, to
     start the active-set passes (started from the whole contact instead, with the
@@ -298,17 +298,23 @@ def _site_scan(layout: PressLayout, x, args, site, offsets, projection):
     onsets on a 20-site log). ∞ where an onset would leave its range."""
     datas, onset_starts, lags = args
     amplitudes, actives_x, contact_x = projection
+    shape, onsets_x, lags_x = layout.unpack(x, onset_starts, lags)
+    # A shift moves this site's bases alone: the other sites' elastic sums and the
+    # windows' decay (the τ's) are those at x.
+    others, decays = [], []
+    for data, onset, lag in zip(datas, onsets_x, lags_x):
+        bases = calc_bases(shape, calc_depths(data, onset, lag), data)  # (T, S, J)
+        others.append(jnp.einsum("tsj,csj->tc", bases, amplitudes) - bases[:, site, :] @ amplitudes[:, site, :].T)
+        decays.append(window_decay(shape.taus, data)[0])
 
     def shifted(offset):
         moved, feasible = _shift_site(layout, x, args, site, offset)
-        shape, onsets, moved_lags = layout.unpack(moved, onset_starts, lags)
-        own, others, actives, contact = [], [], [], []
-        for data, onset, lag, active, touching in zip(datas, onsets, moved_lags, actives_x, contact_x):
+        _, onsets, moved_lags = layout.unpack(moved, onset_starts, lags)
+        own, actives, contact = [], [], []
+        for data, onset, lag, active, touching, other, decay in zip(datas, onsets, moved_lags, actives_x, contact_x, others, decays):
             depths = calc_depths(data, onset, lag)
-            bases = calc_bases(shape, depths, data)  # (T, S, J)
-            own.append(bases[:, site, :])
-            others.append(jnp.einsum("tsj,csj->tc", bases, amplitudes) - own[-1] @ amplitudes[:, site, :].T)
-            pushes = others[-1] + own[-1] @ amplitudes[:, site, :].T > 0.0
+            own.append(calc_site_bases(shape, depths, data, site, decay))
+            pushes = other + own[-1] @ amplitudes[:, site, :].T > 0.0
             contact.append(depths > 0.0)
             actives.append(contact[-1][:, None] & jnp.where(touching[:, None], active, pushes))
         cost = _site_law_cost(own, others, datas, actives, contact, site)
@@ -318,7 +324,7 @@ def _site_scan(layout: PressLayout, x, args, site, offsets, projection):
 
 
 @eqx.filter_jit
-def _projection(layout: PressLayout, x, args):
+def projection_at(layout: PressLayout, x, args):
     """(the solver's χ², (the amplitudes, the actives per log, the contact per log))
     at x: :func:`calc_press_residuals`, with what the scan holds."""
     datas, onset_starts, lags = args
@@ -341,14 +347,14 @@ def scan_site_onsets(layout: PressLayout, x, args, offsets=ONSET_SCAN):
     not held 25 times over)."""
     offsets = jnp.asarray(offsets, x.dtype)
     unmoved = int(jnp.argmin(jnp.abs(offsets)))
-    at_x, projection = _projection(layout, x, args)  # what the scan holds, with the solver's χ² at x
+    at_x, projection = projection_at(layout, x, args)  # what the scan holds, with the solver's χ² at x
     best = float(at_x)
     for site in range(args[0][0].num_sites):
         costs = np.asarray(_site_scan(layout, x, args, jnp.asarray(site), offsets, projection))
         site_best = (best, x, projection)
         for index in _lowest_minima(costs, unmoved):
             moved = _shift_site(layout, x, args, jnp.asarray(site), offsets[index])[0]
-            moved_cost, moved_projection = _projection(layout, moved, args)
+            moved_cost, moved_projection = projection_at(layout, moved, args)
             if float(moved_cost) < site_best[0]:
                 site_best = (float(moved_cost), moved, moved_projection)
         best, x, projection = site_best

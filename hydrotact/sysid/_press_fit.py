@@ -36,7 +36,7 @@ from .._errors import HydrotactError
 from ._fit import CHI_SQUARE_WARNING, identify_time
 from ._lumped import LAG_BOUND, ONSET_HALF_RANGE
 from ._press_data import DRIFT_KNOT_S, prepare_press_logs
-from ._press_solve import SHAPE_STARTS, fit_terms
+from ._press_solve import SHAPE_STARTS, fit_terms, solve_press_scanned
 from ._press_windows import POWERS
 from ._presses import POSITION_COLUMNS, PRESS_THRESHOLD
 from ._solve import make_solver, solver_name
@@ -188,11 +188,19 @@ def _fit_press_logs(logs, sources, *, terms, indentation, position_columns, drif
     counts = range(1, MAX_TERMS + 1) if terms == "auto" else [terms]
     best = None
     for count in counts:
-        layout, args, solution, chi_squares, outputs, tried = fit_terms(count, prepared, len(sites), estimate_lag, lag, solver, max_steps, starts, num_used, num_linear)
+        # With auto, each count's fit is compared unscanned and only the chosen one's
+        # onsets are scanned (a scan is a third of a cold fit). On the full-size
+        # stand-in the scan lowers the own χ² of 1, 2 and 3 terms by 34, 0 and 143
+        # (of 24,000-30,000), the BIC steps between the counts are 5,400 and 530.
+        layout, args, solution, chi_squares, outputs, tried = fit_terms(
+            count, prepared, len(sites), estimate_lag, lag, solver, max_steps, starts, num_used, num_linear, scan=len(counts) == 1
+        )
         bic = chi_squares[0] + (layout.size + num_linear) * math.log(num_used)
         if best is None or bic < best[0]:
             best = (bic, count, layout, args, solution, chi_squares, outputs, tried)
     _, count, layout, args, solution, chi_squares, outputs, tried = best
+    if len(counts) > 1:
+        solution, outputs, chi_squares = solve_press_scanned(layout, solver, max_steps, None, args, solved=(solution, outputs, chi_squares))
     return _summarise(
         layout, args, solution, chi_squares, outputs, prepared, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, report, position_columns, indentation,
         num_starts=tried,

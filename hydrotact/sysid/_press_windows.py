@@ -125,13 +125,20 @@ def _press_windows(taus, data: PressData, values, num_derivatives: int = 0) -> P
     responses, derivatives = calc_kernel_responses_and_derivatives(
         taus, data.times[data.window], inputs, restarts=data.window_restart, with_derivatives=num_derivatives > 0
     )
+    decay, scaled = window_decay(taus, data)
+    derivatives = derivatives[:, :, :num_derivatives] if num_derivatives else jnp.zeros((*responses.shape[:2], 0), responses.dtype)
+    return PressWindows(inputs, responses, derivatives, decay, decay * scaled / taus[None, None, :])
+
+
+def window_decay(taus, data: PressData):
+    """(T, P, K) each term's free decay after each press's window, e^{−(t − end)/τ}
+    (0 up to the end), and (t − end)₊/τ: they depend on the relaxation's τ and the
+    windows, not on the onsets or the inputs."""
     end = data.times[data.window[data.window_last]]  # (P,)
     elapsed = data.times[:, None] - end[None, :]  # (T, P)
     after = elapsed > 0.0
     scaled = jnp.where(after, elapsed, 0.0)[:, :, None] / taus[None, None, :]  # (T, P, K)
-    decay = jnp.where(after[:, :, None], jnp.exp(-scaled), 0.0)
-    derivatives = derivatives[:, :, :num_derivatives] if num_derivatives else jnp.zeros((*responses.shape[:2], 0), responses.dtype)
-    return PressWindows(inputs, responses, derivatives, decay, decay * scaled / taus[None, None, :])
+    return jnp.where(after[:, :, None], jnp.exp(-scaled), 0.0), scaled
 
 
 def _to_sites(data: PressData, window_values, num_samples):
@@ -163,6 +170,23 @@ def calc_bases(shape: Prony, depths, data: PressData, reach=None):
     inputs, _, _ = _law_inputs(depths, data, reach)
     windows = _press_windows(shape.taus, data, jnp.sum(inputs, axis=1))
     return _site_bases(shape, inputs, windows, data, inputs.shape[2])
+
+
+def calc_site_bases(shape: Prony, depths, data: PressData, site, decay):
+    """(T, J) one site's bases, ``calc_bases(shape, depths, data)[:, site]``, given the
+    windows' `decay` (:func:`window_decay`, for shape's τ): a scan of one site's
+    onsets computes the decay once, and each shift only that site's hereditary
+    integrals (J columns, the tails J, not S J)."""
+    inputs, _, _ = _law_inputs(depths, data)
+    own = inputs[:, site, :]  # (T, J): 0 outside the site's presses
+    num_samples, num_powers = own.shape
+    window_inputs = jnp.where((data.press[data.window] == data.window_press)[:, None], own[data.window], 0.0)
+    responses, _ = calc_kernel_responses_and_derivatives(shape.taus, data.times[data.window], window_inputs, restarts=data.window_restart, with_derivatives=False)
+    moduli = shape.moduli
+    law = jnp.einsum("wkj,k->wj", responses, moduli)
+    ends = responses[data.window_last] * moduli[None, :, None]  # (P, K, J)
+    tails = decay.reshape(num_samples, -1) @ ends.reshape(-1, num_powers)
+    return shape.long_term_modulus * own + jnp.zeros((num_samples, num_powers), own.dtype).at[data.window].add(law) + tails
 
 
 def _law_inputs(depths, data: PressData, reach=None):
