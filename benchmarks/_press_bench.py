@@ -152,10 +152,10 @@ def bench_press_fit(args, rows):
     num_terms = 3
     print(f"moving-press stand-in: {path} ({log.num_samples} samples, {num_terms} terms)", flush=True)
     start = time.perf_counter()
-    fit = fit_press_logs([log], [str(path)], terms=num_terms, estimate_lag=True, report=lambda *_: None)
+    fit = fit_press_logs([log], [str(path)], terms=num_terms, estimate_lag=True)
     first = time.perf_counter() - start
     start = time.perf_counter()
-    fit = fit_press_logs([log], [str(path)], terms=num_terms, estimate_lag=True, report=lambda *_: None)
+    fit = fit_press_logs([log], [str(path)], terms=num_terms, estimate_lag=True)
     warm = time.perf_counter() - start
     ours = {
         "task": "press fit", "method": "hydrotact fit_press_logs (lm, hand Jacobian)", "samples": log.num_samples,

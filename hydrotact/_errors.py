@@ -16,6 +16,14 @@ class HydrotactWarning(UserWarning):
     the figures. The command line prints it as one `hydrotact: warning: ...` line."""
 
 
+def warn(message: str, category: type = HydrotactWarning) -> None:
+    """Issue `message` as a :class:`HydrotactWarning` (or a subclass) through
+    :mod:`warnings`, attributed to the caller's caller: the one way hydrotact warns."""
+    import warnings
+
+    warnings.warn(message, category, stacklevel=3)
+
+
 def where(source: str | None) -> str:
     """Prefix for a message about `source` (a file name or a description), or ''."""
     return f"{source}: " if source else ""

@@ -484,6 +484,9 @@ display(Image(report["files"]["relaxation_png"], width=520))
 # baseline taken from the log itself.
 
 # %%
+import warnings
+
+from hydrotact import HydrotactWarning
 from hydrotact.sim import FINGERTIP_SENSOR, StageSession, make_site_grid, simulate_stage_log
 from hydrotact.sysid import compare_fit, fit_press_logs, write_press_fit_outputs
 from hydrotact.viz import plot_comparisons, plot_press_fit
@@ -499,7 +502,11 @@ for name, settings in (("calibration", dict(stage, seed=1)), ("held_out", dict(s
 print(f"simulated in {time.perf_counter() - start:.0f} s")
 
 start = time.perf_counter()
-press_fit = fit_press_logs([read_log(stage_logs["calibration"])], [stage_logs["calibration"].name], terms=len(TRUTH["taus"]), estimate_lag=True, report=print)
+with warnings.catch_warnings(record=True) as caught:  # hydrotact warns through `warnings` (HydrotactWarning): print them as lines
+    warnings.simplefilter("always", HydrotactWarning)
+    press_fit = fit_press_logs([read_log(stage_logs["calibration"])], [stage_logs["calibration"].name], terms=len(TRUTH["taus"]), estimate_lag=True)
+for warning in caught:
+    print(f"warning: {warning.message}")
 print(f"press fit: {time.perf_counter() - start:.1f} s, {press_fit.num_steps} steps, converged {press_fit.converged}")
 print(f"reduced χ² {press_fit.reduced_chi_square:.3f} (the solver's {press_fit.solver_chi_square / press_fit.dof:.3f})")
 print(f"{'':<10}{'truth':>10}{'fitted':>22}")

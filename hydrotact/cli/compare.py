@@ -2,7 +2,6 @@
 each log's baseline fixed) and report how close the prediction comes."""
 
 import json
-import sys
 from pathlib import Path
 
 
@@ -31,7 +30,7 @@ def run(args) -> None:
     from ..sysid import compare_fit
     from ..viz import plot_comparisons
 
-    report = compare_fit(args.fit_dir, args.logs, args.output, mapping=args.mapping, tare=args.tare, home=args.home, report_warning=_warn, plot=plot_comparisons)
+    report = compare_fit(args.fit_dir, args.logs, args.output, mapping=args.mapping, tare=args.tare, home=args.home, plot=plot_comparisons)
     if args.json:
         print(json.dumps(report, indent=2))
         return
@@ -52,6 +51,3 @@ def run(args) -> None:
 def _fmt(value, spec: str = ".3g") -> str:
     return "n/a" if value is None else format(value, spec)
 
-
-def _warn(message: str) -> None:
-    print(f"hydrotact: warning: {message}", file=sys.stderr)

@@ -6,7 +6,6 @@ stage's travel towards the skin (--indentation) and, when the probe moves betwee
 presses, its position (--position-columns); see hydrotact.sysid.fit_press_logs."""
 
 import json
-import sys
 from pathlib import Path
 
 from ._arguments import number
@@ -82,7 +81,7 @@ def run(args) -> None:
     report = fit_logs(
         args.logs, args.output, sensor=args.sensor, lumped=args.lumped, indentation=args.indentation, mapping=args.mapping,
         terms=args.terms, solver=args.solver, tare=args.tare, field=args.field, num_rays=args.rays, progress=not args.json,
-        report_warning=_warn, plot=plot_press_fit if args.lumped else plot_fit, press_options=press_options, max_steps=args.max_steps,
+        plot=plot_press_fit if args.lumped else plot_fit, press_options=press_options, max_steps=args.max_steps,
     )
     if args.json:
         print(json.dumps(report, indent=2))
@@ -95,9 +94,6 @@ def run(args) -> None:
         for path in report["files"].values():
             print(f"  {path}")
 
-
-def _warn(message: str) -> None:
-    print(f"hydrotact: warning: {message}", file=sys.stderr)
 
 
 def print_fit_table(report: dict, truth: dict | None = None) -> None:

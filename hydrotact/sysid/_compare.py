@@ -50,7 +50,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import HydrotactError
+from .._errors import HydrotactError, warn
 from ..data import estimate_noise, read_material
 from ._lumped import ONSET_HALF_RANGE
 from ._prediction import _estimate_home, _make_law_model, _parameter_variance, _predict, _tare_variance
@@ -192,16 +192,15 @@ def _solve_baseline(basis, observed, elastic, used):
     return np.asarray(solve_baselines(jnp.asarray(basis), jnp.asarray(observed - elastic), jnp.asarray(used))).T
 
 
-def compare_log(document, report, log, source, *, tare="no-load", home="estimate", covariance=None, drift=None, saturation_pa=None, report_message=None) -> Comparison:
+def compare_log(document, report, log, source, *, tare="no-load", home="estimate", covariance=None, drift=None, saturation_pa=None) -> Comparison:
     """Predict one log from a fit (see the module's docstring); `covariance` the
     channel law's (from :func:`read_fit`; None: no band). Computed in float64
     whatever the caller's JAX precision (absolute readings of ~1e5 Pa to a Pa)."""
     with jax.enable_x64(True):
-        return _compare_log(document, report, log, source, tare=tare, home=home, covariance=covariance, drift=drift, saturation_pa=saturation_pa, report_message=report_message)
+        return _compare_log(document, report, log, source, tare=tare, home=home, covariance=covariance, drift=drift, saturation_pa=saturation_pa)
 
 
-def _compare_log(document, report, log, source, *, tare, home, covariance, drift, saturation_pa, report_message) -> Comparison:
-    say = report_message or (lambda message: None)
+def _compare_log(document, report, log, source, *, tare, home, covariance, drift, saturation_pa) -> Comparison:
     law = document["channel_law"]
     tare = parse_tare(tare) if isinstance(tare, str) else tare
     if home not in HOMES:
@@ -231,7 +230,7 @@ def _compare_log(document, report, log, source, *, tare, home, covariance, drift
         if unknown.all():
             raise HydrotactError(f"{source}: none of its presses is at a site of the fit (positions from {', '.join(law['position_columns']) or 'no columns'})")
         if unknown.any():
-            say(f"{source}: {int(unknown.sum())} press(es) at sites the fit has not seen: not compared")
+            warn(f"{source}: {int(unknown.sum())} press(es) at sites the fit has not seen: not compared")
         keep = site_ids >= 0
         onsets = np.array([sites[s]["onset_m"] for s in site_ids[keep]])
         lag = float(law["lag_s"])
@@ -252,7 +251,7 @@ def _compare_log(document, report, log, source, *, tare, home, covariance, drift
     if estimated:
         shift, shift_var = _estimate_home(model, amplitudes, basis, observed, mask, noise)
         if abs(shift) > 0.99 * ONSET_HALF_RANGE:
-            say(f"{source}: its home shift is at its bound (±{ONSET_HALF_RANGE * 1e3:g} mm of the fit's onsets): is it a log of this sensor and stage?")
+            warn(f"{source}: its home shift is at its bound (±{ONSET_HALF_RANGE * 1e3:g} mm of the fit's onsets): is it a log of this sensor and stage?")
     elastic, bases, touching, by_q, by_shift = (np.asarray(a) for a in _predict(model, amplitudes, jnp.asarray(shift)))
     if isinstance(tare, tuple):
         first = times - times[0] <= tare[1]
@@ -308,7 +307,7 @@ def _compare_log(document, report, log, source, *, tare, home, covariance, drift
     )
 
 
-def compare_fit(fit_dir, paths, output, *, mapping=None, tare="no-load", home="estimate", report_warning=None, plot=None) -> dict:
+def compare_fit(fit_dir, paths, output, *, mapping=None, tare="no-load", home="estimate", plot=None) -> dict:
     """Compare held-out logs with a lumped fit's prediction and write, into
     `output`: `compare.json` (per log: the home shift; per channel: RMS, R²,
     hold-shape RMS, noise, the band's RMS and the normalized RMS),
@@ -329,12 +328,12 @@ def compare_fit(fit_dir, paths, output, *, mapping=None, tare="no-load", home="e
     if home not in HOMES:
         raise HydrotactError(f"--home: expected one of {', '.join(HOMES)}, got {home!r}")
     document, report, covariance = read_fit(fit_dir)
-    if covariance is None and report_warning is not None:
-        report_warning(f"{fit_dir}: its material.json names no covariance of the channel law (a fit written before the prediction band): no band; refit for one")
-    logs = read_logs([Path(p) for p in paths], mapping, None, report_warning, require_sensor=False)
+    if covariance is None:
+        warn(f"{fit_dir}: its material.json names no covariance of the channel law (a fit written before the prediction band): no band; refit for one")
+    logs = read_logs([Path(p) for p in paths], mapping, None, require_sensor=False)
     drift = (report or {}).get("drift")
     with jax.enable_x64(True):
-        comparisons = [compare_log(document, report, log, str(path), tare=tare, home=home, covariance=covariance, drift=drift, report_message=report_warning) for log, path in zip(logs, paths)]
+        comparisons = [compare_log(document, report, log, str(path), tare=tare, home=home, covariance=covariance, drift=drift) for log, path in zip(logs, paths)]
     output.mkdir(parents=True, exist_ok=True)
     files = {}
     for comparison, path in zip(comparisons, paths):

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._errors import HydrotactError
+from .._errors import HydrotactError, warn
 from .._files import check_output
 from ..data import LogWarning, read_log, sensor_spec, tare_log
 from ._fit import CHI_SQUARE_WARNING, MAX_AUTO_TERMS, fit_auto, fit_problem
@@ -58,9 +58,9 @@ def _check_responds(log, source: str) -> None:
         )
 
 
-def read_logs(paths, mapping=None, sensor=None, report_warning=None, require_sensor: bool = True):
+def read_logs(paths, mapping=None, sensor=None, require_sensor: bool = True):
     """Read and check every log first (one error line, nothing written). Warnings
-    that repeat across the logs (uneven sampling, say) are reported once, with the
+    that repeat across the logs (uneven sampling, say) are issued once, with the
     number of logs and the first one named."""
     if not paths:
         raise HydrotactError("no logs given")
@@ -78,7 +78,7 @@ def read_logs(paths, mapping=None, sensor=None, report_warning=None, require_sen
         _check_responds(log, str(path))
         logs.append(log)
         for warning in caught:
-            if issubclass(warning.category, LogWarning) and report_warning is not None:
+            if issubclass(warning.category, LogWarning):
                 message = str(warning.message)
                 kind = message.removeprefix(f"{path}: ").split(":")[0].split("(")[0].strip()
                 seen.setdefault(kind, {}).setdefault(str(path), message)
@@ -87,13 +87,13 @@ def read_logs(paths, mapping=None, sensor=None, report_warning=None, require_sen
     for by_log in seen.values():
         messages = list(by_log.values())
         others = f" (and {len(messages) - 1} more logs alike)" if len(messages) > 1 else ""
-        report_warning(messages[0] + others)
+        warn(messages[0] + others, LogWarning)
     return logs
 
 
 def fit_logs(
     paths, output, *, sensor=None, lumped=False, indentation="indentation", mapping=None, terms="auto", solver=None, tare=False,
-    field=None, num_rays=None, progress=True, report_warning=None, plot=None, press_options=None, max_steps=None,
+    field=None, num_rays=None, progress=True, plot=None, press_options=None, max_steps=None,
 ) -> dict:
     """Fit the logs at `paths` and write material.json, report.json (and, with `plot`,
     the pictures) into `output`. With `tare`, each log is first tared on its no-load
@@ -104,7 +104,9 @@ def fit_logs(
     object (default: Levenberg–Marquardt) or the name of one of SOLVERS. A `lumped`
     fit is the press model of :func:`fit_press_logs` (`press_options` its keyword
     arguments: position_columns, drift, drift_from, lag, estimate_lag, saturation_pa, threshold, starts);
-    `plot` then draws a PressFit. `max_steps` caps the solver's steps. Returns the report (with `files`)."""
+    `plot` then draws a PressFit. `max_steps` caps the solver's steps. What may
+    mislead (clipped readings, a poor χ², parameters the logs cannot identify) is
+    issued as a :class:`HydrotactWarning`. Returns the report (with `files`)."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     output = check_output(output, directory=True, what="the fit")
@@ -114,8 +116,8 @@ def fit_logs(
     terms = parse_terms(terms)
     if lumped:
         options = dict(press_options or {}, **({"max_steps": max_steps} if max_steps is not None else {}))
-        return _fit_press_files(paths, output, sensor, indentation, mapping, terms, solver, tare, report_warning, plot, options)
-    logs = read_logs([Path(p) for p in paths], mapping, sensor, report_warning)
+        return _fit_press_files(paths, output, sensor, indentation, mapping, terms, solver, tare, plot, options)
+    logs = read_logs([Path(p) for p in paths], mapping, sensor)
     for log, path in zip(logs, paths):  # every log checked before the first is simulated
         check_pose_columns(log, str(path))
         if sensor_spec(log.metadata["sensor"], str(path)) is None:
@@ -125,8 +127,8 @@ def fit_logs(
             )
         log_probe(log, str(path))
     sensors = list(dict.fromkeys(log.metadata["sensor"] for log in logs))
-    if len(sensors) > 1 and report_warning is not None:  # each sensor keeps its own gains; the material is one
-        report_warning(
+    if len(sensors) > 1:  # each sensor keeps its own gains; the material is one
+        warn(
             f"the logs come from {len(sensors)} sensors ({', '.join(sensors)}): one material is fitted to all of them, right only if they are cast "
             "from the same elastomer (fit each sensor on its own otherwise)"
         )
@@ -134,9 +136,9 @@ def fit_logs(
         logs = [tare_log(log, source=str(path))[0] for log, path in zip(logs, paths)]
     for log, path in zip(logs, paths):
         clipped = find_clipped_readings(log, log.channels).sum(axis=0)
-        if clipped.any() and report_warning is not None:
+        if clipped.any():
             names = [name for name, n in zip(log.metadata["channels"], clipped) if n]
-            report_warning(
+            warn(
                 f"{path}: {int(clipped.sum())} readings on {len(names)} channels ({', '.join(names[:4])}{', ...' if len(names) > 4 else ''}) sit at the "
                 "part's range limits (the barometer clipped them): masked, not fitted"
             )
@@ -161,13 +163,12 @@ def fit_logs(
     if unidentified:
         messages.append(f"not identified by these logs: {', '.join(unidentified)} (marked in the table and report.json; fewer --terms, or longer logs)")
     for message in messages:
-        if report_warning is not None:
-            report_warning(message)
+        warn(message)
     report = write_fit_outputs(result, output, paths=[str(p) for p in paths], plot=plot)
     return report
 
 
-def _fit_press_files(paths, output, sensor, indentation, mapping, terms, solver, tare, report_warning, plot, options) -> dict:
+def _fit_press_files(paths, output, sensor, indentation, mapping, terms, solver, tare, plot, options) -> dict:
     from ._press_fit import MAX_TERMS, fit_press_logs
     from ._press_report import write_press_fit_outputs
 
@@ -175,7 +176,7 @@ def _fit_press_files(paths, output, sensor, indentation, mapping, terms, solver,
         raise HydrotactError("--tare: a lumped fit fits each channel's drifting baseline itself (--drift); leave --tare out")
     if terms != "auto" and terms > MAX_TERMS:
         raise HydrotactError(f"--terms: a lumped fit takes 0 to {MAX_TERMS} Prony terms or auto, got {terms}")
-    logs = read_logs([Path(p) for p in paths], mapping, sensor, report_warning, require_sensor=False)
+    logs = read_logs([Path(p) for p in paths], mapping, sensor, require_sensor=False)
     sensors = {log.metadata.get("sensor") for log in logs}
     if len(sensors) > 1:
         first = logs[0].metadata.get("sensor")
@@ -184,5 +185,5 @@ def _fit_press_files(paths, output, sensor, indentation, mapping, terms, solver,
             f"{paths[other]}: from sensor {logs[other].metadata.get('sensor')!r}, but {paths[0]} is from {first!r}: a lumped fit is one sensor's "
             "channel law (fit each sensor on its own)"
         )
-    fit = fit_press_logs(logs, [str(p) for p in paths], terms=terms, indentation=indentation, solver=solver, report=report_warning, **options)
+    fit = fit_press_logs(logs, [str(p) for p in paths], terms=terms, indentation=indentation, solver=solver, **options)
     return write_press_fit_outputs(fit, output, paths=[str(p) for p in paths], plot=plot)

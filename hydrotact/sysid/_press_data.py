@@ -13,7 +13,7 @@ import warnings
 
 import numpy as np
 
-from .._errors import HydrotactError
+from .._errors import HydrotactError, warn
 from ..data import estimate_noise, sensor_spec
 from ._lumped import ONSET_HALF_RANGE
 from ._press_windows import PressData, make_press_data
@@ -253,16 +253,15 @@ def _first_onsets(travel, observed, mask, presses, noise, lag, times) -> np.ndar
 
 def prepare_press_logs(
     logs, sources, *, indentation="indentation", position_columns=POSITION_COLUMNS, drift=DRIFT_KNOT_S, lag=0.0,
-    saturation_pa=None, threshold=PRESS_THRESHOLD, report=None, drift_from="all",
+    saturation_pa=None, threshold=PRESS_THRESHOLD, drift_from="all",
 ):
     """The logs made ready for the fit: presses and sites found, sites matched across
     logs by position, clipped samples masked, noise estimated, silent channels and
-    logs without presses skipped (with a line through `report`).
+    logs without presses skipped (each with a :class:`HydrotactWarning`).
 
     **Returns:** (PressLogs, fitted channel names, site positions (S, k), skipped
     {name: reason}).
     """
-    report = report or (lambda message: None)
     if drift_from not in DRIFT_FROM:
         raise HydrotactError(f"--drift-from: expected {' or '.join(DRIFT_FROM)}, got {drift_from!r}")
     channels = list(logs[0].metadata["channels"])
@@ -284,12 +283,12 @@ def prepare_press_logs(
             skipped[source] = "every press began in a gap of the log"
             continue
         if presses.unseen.any():
-            report(f"{source}: {int(presses.unseen.sum())} press(es) began in a gap of the log (loading unseen): masked, kept in the model for their memory")
+            warn(f"{source}: {int(presses.unseen.sum())} press(es) began in a gap of the log (loading unseen): masked, kept in the model for their memory")
         kept.append((log, source, presses))
     if not kept:
         raise HydrotactError("no log has a press to fit: " + "; ".join(f"{name}: {reason}" for name, reason in skipped.items()))
     for name, reason in skipped.items():
-        report(f"{name}: skipped: {reason}")
+        warn(f"{name}: skipped: {reason}")
     # Sites shared by the logs: positions within SITE_TOLERANCE are one site; a log
     # without position columns has sites of its own, one per press.
     centres, prepared = [], []
@@ -331,7 +330,7 @@ def prepare_press_logs(
     for c, name in enumerate(channels):
         if not responding[c]:
             skipped[name] = f"channel {name!r} moves less than {RESPONSE_SNR:g} noise stds in every press: not fitted"
-            report(f"skipped: {skipped[name]}")
+            warn(f"skipped: {skipped[name]}")
     if not responding.any():
         raise HydrotactError("no channel responds to the presses in any log (each moves less than " f"{RESPONSE_SNR:g} noise stds): nothing to fit")
     fitted = np.flatnonzero(responding)
@@ -339,7 +338,7 @@ def prepare_press_logs(
     for log, source, presses, site_ids, observed, clipped, masked, noise, log_responding, responses in staged:
         if not log_responding[fitted].any():
             skipped[source] = f"no channel responds to its presses (each moves less than {RESPONSE_SNR:g} noise stds)"
-            report(f"{source}: skipped: {skipped[source]}")
+            warn(f"{source}: skipped: {skipped[source]}")
             continue
         times = np.asarray(log.times, dtype=np.float64)
         travel = np.asarray(log.columns[indentation], dtype=np.float64)
@@ -362,7 +361,7 @@ def prepare_press_logs(
         ))
         if clipped[:, fitted].any():
             counts = ", ".join(f"{channels[c]} {n}" for c, n in zip(fitted, clipped[:, fitted].sum(axis=0)) if n)
-            report(f"{source}: masked clipped samples ({counts})")
+            warn(f"{source}: masked clipped samples ({counts})")
     if not out:
         raise HydrotactError("no log has a responding channel: " + "; ".join(f"{name}: {reason}" for name, reason in skipped.items()))
     width = max((len(c) for c in centres), default=0)

@@ -17,7 +17,7 @@ Samples a barometer clipped (at the part's limits, or flat at a channel's maximu
 are masked (weight 0), not refused. Each channel's noise is estimated from its own
 samples and weights its residuals, so the reduced χ² is ≈ 1 for a model that
 describes the data. Channels that respond to no press, and logs with no press or no
-responding channel, are skipped with a message through `report`.
+responding channel, are skipped, each with a :class:`HydrotactWarning`.
 
 The result reports each parameter with its standard error and whether the data
 identify it: a parameter pinned at its bound, a time constant outside
@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import HydrotactError
+from .._errors import HydrotactError, warn
 from ._fit import CHI_SQUARE_WARNING, identify_time
 from ._lumped import LAG_BOUND, ONSET_HALF_RANGE
 from ._press_data import DRIFT_KNOT_S, prepare_press_logs
@@ -134,7 +134,7 @@ def parse_starts(text) -> int | str:
 
 def fit_press_logs(
     logs, sources=None, *, terms="auto", indentation="indentation", position_columns=POSITION_COLUMNS, drift=DRIFT_KNOT_S,
-    lag=0.0, estimate_lag=False, saturation_pa=None, threshold=PRESS_THRESHOLD, solver=None, max_steps=400, starts="auto", report=None,
+    lag=0.0, estimate_lag=False, saturation_pa=None, threshold=PRESS_THRESHOLD, solver=None, max_steps=400, starts="auto",
     drift_from="all",
 ) -> PressFit:
     """Fit the lumped press model jointly to stage logs (see the module's docstring).
@@ -152,21 +152,20 @@ def fit_press_logs(
     object or name (default Levenberg-Marquardt); `max_steps`; `starts` the relaxation
     shapes to start from (SHAPE_STARTS): "auto" tries the next while the fit ends at
     a reduced χ² above RESTART_REDUCED_CHI2, a number N the first N, and the lowest
-    χ² is kept; `report(message)` receives the skipped channels and logs and
-    the warnings.
+    χ² is kept. The skipped channels and logs, and what may mislead (a poor χ²,
+    parameters the logs cannot identify), are issued as :class:`HydrotactWarning`.
 
     **Returns:** a :class:`PressFit`.
     """
     with jax.enable_x64(True):  # absolute readings (~1e5 Pa) to a Pa, and normal equations: float64
         return _fit_press_logs(
             logs, sources, terms=terms, indentation=indentation, position_columns=position_columns, drift=drift, lag=lag,
-            estimate_lag=estimate_lag, saturation_pa=saturation_pa, threshold=threshold, solver=solver, max_steps=max_steps, starts=starts, report=report,
+            estimate_lag=estimate_lag, saturation_pa=saturation_pa, threshold=threshold, solver=solver, max_steps=max_steps, starts=starts,
             drift_from=drift_from,
         )
 
 
-def _fit_press_logs(logs, sources, *, terms, indentation, position_columns, drift, lag, estimate_lag, saturation_pa, threshold, solver, max_steps, starts, report, drift_from):
-    report = report or (lambda message: None)
+def _fit_press_logs(logs, sources, *, terms, indentation, position_columns, drift, lag, estimate_lag, saturation_pa, threshold, solver, max_steps, starts, drift_from):
     sources = list(sources) if sources is not None else [f"log {k + 1}" for k in range(len(logs))]
     if not logs:
         raise HydrotactError("no logs given")
@@ -181,7 +180,7 @@ def _fit_press_logs(logs, sources, *, terms, indentation, position_columns, drif
     solver = make_solver(solver or "lm") if solver is None or isinstance(solver, str) else solver
     prepared, channels, sites, skipped = prepare_press_logs(
         logs, sources, indentation=indentation, position_columns=position_columns, drift=drift, lag=lag, saturation_pa=saturation_pa,
-        threshold=threshold, report=report, drift_from=drift_from,
+        threshold=threshold, drift_from=drift_from,
     )
     num_used = int(sum(log.mask.sum() for log in prepared))
     num_linear = (sum(log.baseline.shape[1] for log in prepared) + len(sites) * len(POWERS)) * len(channels)
@@ -202,13 +201,13 @@ def _fit_press_logs(logs, sources, *, terms, indentation, position_columns, drif
     if len(counts) > 1:
         solution, outputs, chi_squares = solve_press_scanned(layout, solver, max_steps, None, args, solved=(solution, outputs, chi_squares))
     return _summarise(
-        layout, args, solution, chi_squares, outputs, prepared, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, report, position_columns, indentation,
+        layout, args, solution, chi_squares, outputs, prepared, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, position_columns, indentation,
         num_starts=tried,
     )
 
 
 def _summarise(
-    layout, args, solution, chi_squares, outputs, logs, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, report, position_columns, indentation,
+    layout, args, solution, chi_squares, outputs, logs, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, position_columns, indentation,
     *, num_starts,
 ) -> PressFit:
     x = solution.value
@@ -242,7 +241,7 @@ def _summarise(
         onset_stds.append(ONSET_HALF_RANGE * (1 - np.tanh(z) ** 2) * std_x[first : first + count])
         pinned = np.abs(np.tanh(z)) > 0.999
         if pinned.any():
-            report(f"{log.source}: {int(pinned.sum())} press onsets at their bound (±{ONSET_HALF_RANGE * 1e3:g} mm of the first estimate): not identified")
+            warn(f"{log.source}: {int(pinned.sum())} press onsets at their bound (±{ONSET_HALF_RANGE * 1e3:g} mm of the first estimate): not identified")
         first += count
     lag_params = []
     for j, lag in enumerate(lags):
@@ -276,7 +275,7 @@ def _summarise(
     if unidentified:
         messages.append(f"not identified by these logs: {', '.join(unidentified)} (see the report)")
     for message in messages:
-        report(message)
+        warn(message)
     return PressFit(
         ratios=ratios, taus=taus, amplitudes=np.asarray(amplitudes), sites=sites,
         site_onsets=site_onsets, onsets=onset_values, onset_stds=onset_stds, lags=lag_params, baselines=[np.asarray(b) for b in baselines],
