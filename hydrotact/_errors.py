@@ -6,6 +6,8 @@ command line prints that message on one line and exits with status 2; it never s
 a traceback for one.
 """
 
+import warnings
+
 
 class HydrotactError(ValueError):
     """A problem with the user's input, with a message that says where it is."""
@@ -19,8 +21,6 @@ class HydrotactWarning(UserWarning):
 def warn(message: str, category: type = HydrotactWarning) -> None:
     """Issue `message` as a :class:`HydrotactWarning` (or a subclass) through
     :mod:`warnings`, attributed to the caller's caller: the one way hydrotact warns."""
-    import warnings
-
     warnings.warn(message, category, stacklevel=3)
 
 

@@ -4,13 +4,14 @@ and the channel law that `compare` predicts with), `report.json` and plots."""
 
 from pathlib import Path
 
+import jax.numpy as jnp
 import numpy as np
 
 from .. import __version__
 from .._files import atomic_path
 from ..data import make_material_document
 from ._press_fit import PressFit
-from ._press_windows import DEPTH_SCALE, POWERS
+from ._press_windows import DEPTH_SCALE, POWERS, calc_depths
 from ._problem import _file_digest
 from ._report import write_outputs
 
@@ -50,9 +51,8 @@ def law_reach(fit: PressFit) -> np.ndarray:
     reach = np.zeros(len(fit.sites))
     for log, onsets, lag in zip(fit.logs, fit.onsets, fit.lags):
         inside = log.press >= 0
-        travel = np.interp(log.times - lag.value, log.times, log.travel)[inside]
-        press = log.press[inside]
-        np.maximum.at(reach, log.press_site[press], np.maximum(travel - np.asarray(onsets)[press], 0.0))
+        depths = np.asarray(calc_depths(log.to_data(len(fit.sites)), jnp.asarray(onsets), lag.value))  # the model's own
+        np.maximum.at(reach, log.press_site[log.press[inside]], depths[inside])
     return reach
 
 

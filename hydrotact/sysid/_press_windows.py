@@ -16,8 +16,8 @@ DEPTH_SCALE = 1e-3  # m: δ is measured in millimetres in the law (amplitudes in
 POWERS = (1.5, 2.0, 2.5, 3.0)  # the law's powers of the depth (from Hertz's 1.5 up: see hydrotact.sysid._lumped)
 # How a law goes on past the deepest depth it was fitted to: the power of the depth a
 # sphere's contact force grows with in the hydroelastic model (Hertz's is 1.5). Past
-# a held-out press's reach, 1.5 and 2 predicted a 5 mm stand-in press (0.35 mm
-# fitted, 0.6 mm held out) to 24-43 and 21-34 Pa and the MTL strip's 6 mm log from
+# a held-out press's reach, 1.5 and 2 predicted the test stand-in's 0.6 mm presses
+# from a fit of its 0.35 mm ones to 24-43 and 21-34 Pa and the MTL strip's 6 mm log from
 # its 5 mm ones to 1,123 and 1,040 Pa pooled (1 and 3: 2,298 and 1,409 Pa; the fitted
 # powers at any depth: 25-110 Pa and 5,054 Pa).
 CONTINUATION_POWER = 2.0
@@ -116,17 +116,20 @@ class PressWindows(eqx.Module):
         return values[data.window_last]
 
 
-def _press_windows(taus, data: PressData, values, num_derivatives: int = 0) -> PressWindows:
+def _press_windows(taus, data: PressData, values, num_derivatives: int = 0, decay=None) -> PressWindows:
     """:class:`PressWindows` for the per-sample inputs `values` (T, C) (each sample's
     value belongs to its own press), with the τ derivatives of the first
-    `num_derivatives` columns."""
+    `num_derivatives` columns; `decay` the windows' (:func:`window_decay`) where the
+    caller has it (then `decay_tau` is not computed: None)."""
     own = data.press[data.window] == data.window_press
     inputs = jnp.where(own[:, None], values[data.window], 0.0)  # (W, C)
     responses, derivatives = calc_kernel_responses_and_derivatives(
         taus, data.times[data.window], inputs, restarts=data.window_restart, with_derivatives=num_derivatives > 0
     )
-    decay, scaled = window_decay(taus, data)
     derivatives = derivatives[:, :, :num_derivatives] if num_derivatives else jnp.zeros((*responses.shape[:2], 0), responses.dtype)
+    if decay is not None:
+        return PressWindows(inputs, responses, derivatives, decay, None)
+    decay, scaled = window_decay(taus, data)
     return PressWindows(inputs, responses, derivatives, decay, decay * scaled / taus[None, None, :])
 
 
@@ -180,11 +183,9 @@ def calc_site_bases(shape: Prony, depths, data: PressData, site, decay):
     inputs, _, _ = _law_inputs(depths, data)
     own = inputs[:, site, :]  # (T, J): 0 outside the site's presses
     num_samples, num_powers = own.shape
-    window_inputs = jnp.where((data.press[data.window] == data.window_press)[:, None], own[data.window], 0.0)
-    responses, _ = calc_kernel_responses_and_derivatives(shape.taus, data.times[data.window], window_inputs, restarts=data.window_restart, with_derivatives=False)
-    moduli = shape.moduli
-    law = jnp.einsum("wkj,k->wj", responses, moduli)
-    ends = responses[data.window_last] * moduli[None, :, None]  # (P, K, J)
+    windows = _press_windows(shape.taus, data, own, decay=decay)
+    law = jnp.einsum("wkj,k->wj", windows.responses, shape.moduli)
+    ends = windows.at_ends(data, windows.responses) * shape.moduli[None, :, None]  # (P, K, J)
     tails = decay.reshape(num_samples, -1) @ ends.reshape(-1, num_powers)
     return shape.long_term_modulus * own + jnp.zeros((num_samples, num_powers), own.dtype).at[data.window].add(law) + tails
 
