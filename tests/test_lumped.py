@@ -148,6 +148,36 @@ def test_the_nonlinear_fit_recovers_shape_onsets_and_lag():
     assert abs(float(lags[0]) - 0.05) < 0.005
 
 
+def test_a_term_switched_off_is_the_fit_without_it():
+    """A layout of 3 terms with the third off (PressLayout.active: what --terms auto
+    runs, one compiled program for every count) is the 2-term model: the same
+    residuals, the same Jacobian in the terms that are on and 0 in the two columns
+    of the term that is off, and a solve from the same start ends where the 2-term
+    solve does, the switched-off term where it started."""
+    rng = np.random.default_rng(1)
+    num_presses = 6
+    data, onsets, _, _ = _model_log(rng, 1600, num_presses, 3, 2, 10.0)
+    args = ((data,), (jnp.asarray(onsets + 60e-6),), (0.0,))
+    two = PressLayout(2, (num_presses,), True)
+    three = PressLayout(3, (num_presses,), True, jnp.asarray([1.0, 1.0, 0.0]))
+    small, keep = three.without_inactive()
+    assert small == two and list(keep) == [0, 1, 3, 4] + list(range(6, 6 + num_presses + 1))
+    x2 = jnp.concatenate([jnp.log(jnp.asarray([0.08, 0.2])), jnp.log(jnp.asarray([0.4, 6.0])), jnp.asarray(rng.normal(0, 0.3, num_presses)), jnp.asarray([0.1])])
+    x3 = jnp.zeros(three.size).at[jnp.asarray(keep)].set(x2).at[2].set(jnp.log(0.3)).at[5].set(jnp.log(30.0))
+    value2, jacobian2 = calc_press_jacobian(two, x2, args)
+    value3, jacobian3 = calc_press_jacobian(three, x3, args)
+    np.testing.assert_allclose(np.asarray(value3), np.asarray(value2), rtol=1e-10, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(jacobian3)[:, keep], np.asarray(jacobian2), rtol=1e-8, atol=1e-8 * float(jnp.max(jnp.abs(jacobian2))))
+    assert not np.any(np.asarray(jacobian3)[:, [2, 5]])
+    start2 = jnp.concatenate([jnp.log(jnp.asarray([0.05, 0.05])), jnp.log(jnp.asarray([0.3, 3.0])), jnp.zeros(num_presses + 1)])
+    start3 = jnp.zeros(three.size).at[jnp.asarray(keep)].set(start2).at[2].set(jnp.log(0.3)).at[5].set(jnp.log(30.0))
+    solved2 = solve_least_squares(press_residual_fn(two), start2, args, max_steps=200)
+    solved3 = solve_least_squares(press_residual_fn(three), start3, args, max_steps=200)
+    assert bool(solved2.converged) and bool(solved3.converged)
+    np.testing.assert_allclose(np.asarray(solved3.value)[keep], np.asarray(solved2.value), atol=1e-6)
+    assert np.asarray(solved3.value)[2] == float(start3[2]) and np.asarray(solved3.value)[5] == float(start3[5])
+
+
 def test_the_site_onset_scan_leaves_a_minimum_where_a_sites_presses_all_start_early():
     """The trap the scan is for, built on purpose: the log of the test above with
     site 0's onsets started 150 µm early (both of its presses), the rest at the

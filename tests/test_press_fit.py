@@ -335,11 +335,17 @@ def test_a_press_deeper_than_any_fitted_is_predicted_past_the_laws_reach(stand_i
 
 
 def test_fit_and_compare_from_the_command_line(stand_in, tmp_path, capsys):
+    """--terms auto (the default) picks the stand-in's two terms by BIC from fits of
+    1-3 (one compiled program, the terms past each count off), and the fit is
+    reported in its own layout."""
     path = stand_in["calibration"][1][0]
-    code = main(["fit", str(path), "--lumped", "--terms", "2", "--estimate-lag", "-o", str(tmp_path / "fit")])
+    code = main(["fit", str(path), "--lumped", "--terms", "auto", "--estimate-lag", "-o", str(tmp_path / "fit")])
     out, err = capsys.readouterr()
     assert code == 0, err
-    assert "τ2" in out and "E2/E∞" in out and "f3" in err
+    assert "τ2" in out and "E2/E∞" in out and "τ3" not in out and "f3" in err
+    report = json.loads((tmp_path / "fit" / "report.json").read_text())
+    assert report["num_terms"] == 2 and len(report["prony_terms"]) == 2
+    np.testing.assert_allclose(sorted(term["tau_s"]["value"] for term in report["prony_terms"]), [0.5, 5.0], rtol=0.15)
     for name in ("material.json", "report.json", "traces.png", "residuals.png", "relaxation.png"):
         assert (tmp_path / "fit" / name).is_file()
     code = main(["compare", str(tmp_path / "fit"), str(stand_in["held_out"][0][0]), "-o", str(tmp_path / "compare")])

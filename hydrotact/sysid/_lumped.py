@@ -69,12 +69,12 @@ def calc_press_residuals(shape: Prony, onsets, lags, datas):
     **Returns:** (residuals per log [(T_l, C)], baseline coefficients per log
     [(C, D_l)], amplitudes (C, S, J)).
     """
-    return _project(shape, onsets, lags, datas)[:3]
+    return calc_projection(shape, onsets, lags, datas)[:3]
 
 
-def _project(shape: Prony, onsets, lags, datas):
+def calc_projection(shape: Prony, onsets, lags, datas):
     """:func:`calc_press_residuals`, and where each channel's elastic part is on per
-    log (T, C) and the contact per log (T,)."""
+    log (T, C), the contact per log (T,) and the bases per log (T, S, J)."""
     bases, contact = [], []
     for data, onset, lag in zip(datas, onsets, lags):
         depths = calc_depths(data, onset, lag)
@@ -82,7 +82,7 @@ def _project(shape: Prony, onsets, lags, datas):
         contact.append(depths > 0.0)
     actives = find_actives(bases, contact, datas)
     drifts, amplitudes, residuals = solve_linear(bases, datas, actives, contact)
-    return residuals, drifts, amplitudes, actives, contact
+    return residuals, drifts, amplitudes, actives, contact, bases
 
 
 def calc_press_jacobian(layout: "PressLayout", x, args, linear: bool = False):
@@ -202,11 +202,19 @@ LAG_BOUND = 0.5  # s: an estimated lag stays within ±this
 class PressLayout(eqx.Module):
     """Where the nonlinear parameters sit in x (static): log Eᵢ/E∞ (K), log τᵢ (K),
     each log's onsets' unbounded coordinates (P_l), and each log's lag's (1 per log,
-    when estimated)."""
+    when estimated).
+
+    `active` (K,) 1 or 0 per term, or None (all on): a term that is off has Eᵢ = 0,
+    so it adds nothing and its two columns of the Jacobian are 0 (the solver leaves
+    them where they start). It is an array, not a static field, so that the fits of
+    1 to K terms `terms="auto"` compares run one compiled program (K terms, some
+    off) instead of one per count: the compilation is most of a cold fit's cost per
+    count. :meth:`without_inactive` gives the layout and x of the terms that are on."""
 
     num_terms: int = eqx.field(static=True)
     num_presses: tuple[int, ...] = eqx.field(static=True)
     estimate_lag: bool = eqx.field(static=True)
+    active: jax.Array | None = None
 
     @property
     def size(self) -> int:
@@ -216,7 +224,8 @@ class PressLayout(eqx.Module):
         """(shape, onsets per log, lags per log) from x; `onset_starts` the centres of
         the onsets' ranges, `lags` the lags when they are not estimated."""
         k = self.num_terms
-        shape = Prony(jnp.ones((), x.dtype), jnp.exp(x[:k]), jnp.exp(x[k : 2 * k]))
+        moduli = jnp.exp(x[:k]) if self.active is None else jnp.exp(x[:k]) * self.active.astype(x.dtype)
+        shape = Prony(jnp.ones((), x.dtype), moduli, jnp.exp(x[k : 2 * k]))
         first = 2 * k
         onsets = []
         for count, start in zip(self.num_presses, onset_starts):
@@ -225,6 +234,16 @@ class PressLayout(eqx.Module):
         if self.estimate_lag:
             lags = tuple(LAG_BOUND * jnp.tanh(x[first + log]) for log in range(len(self.num_presses)))
         return shape, tuple(onsets), tuple(lags)
+
+    def without_inactive(self):
+        """(the layout of the terms that are on, the indices of their entries in x):
+        x[indices] is x in that layout (host-side; `active` concrete)."""
+        if self.active is None:
+            return self, np.arange(self.size)
+        on = np.flatnonzero(np.asarray(self.active) > 0.0)
+        k = self.num_terms
+        indices = np.concatenate([on, k + on, np.arange(2 * k, self.size)])
+        return PressLayout(len(on), self.num_presses, self.estimate_lag), indices
 
 
 def press_residual_fn(layout: PressLayout):
@@ -328,7 +347,7 @@ def projection_at(layout: PressLayout, x, args):
     """(the solver's χ², (the amplitudes, the actives per log, the contact per log))
     at x: :func:`calc_press_residuals`, with what the scan holds."""
     datas, onset_starts, lags = args
-    residuals, _, amplitudes, actives, contact = _project(*layout.unpack(x, onset_starts, lags), datas)
+    residuals, _, amplitudes, actives, contact, _ = calc_projection(*layout.unpack(x, onset_starts, lags), datas)
     return sum(jnp.sum(r**2) for r in residuals), (amplitudes, actives, contact)
 
 

@@ -4,6 +4,7 @@ and the channel law that `compare` predicts with), `report.json` and plots."""
 
 from pathlib import Path
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -44,6 +45,9 @@ def make_press_material(fit: PressFit, paths=(), name: str | None = None) -> dic
     return {key: document[key] for key in write_order if key in document}
 
 
+_depths = eqx.filter_jit(calc_depths)  # one compiled program: op by op, a cold command line spent 1.5 s on three logs' depths
+
+
 def law_reach(fit: PressFit) -> np.ndarray:
     """(S,) the deepest depth each site's law was fitted to, m: the most that
     travel(t − lag) passed its press's onset in any press at the site (masked samples
@@ -51,7 +55,7 @@ def law_reach(fit: PressFit) -> np.ndarray:
     reach = np.zeros(len(fit.sites))
     for log, onsets, lag in zip(fit.logs, fit.onsets, fit.lags):
         inside = log.press >= 0
-        depths = np.asarray(calc_depths(log.to_data(len(fit.sites)), jnp.asarray(onsets), lag.value))  # the model's own
+        depths = np.asarray(_depths(log.to_data(len(fit.sites)), jnp.asarray(onsets), jnp.asarray(lag.value)))  # the model's own
         np.maximum.at(reach, log.press_site[log.press[inside]], depths[inside])
     return reach
 

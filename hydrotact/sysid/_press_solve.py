@@ -7,11 +7,12 @@ it over the term counts and reports the result."""
 import math
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._stall import doing
-from ._lumped import LAG_BOUND, PressLayout, calc_press_jacobian, press_residual_fn, projection_at, scan_site_onsets
+from ._lumped import LAG_BOUND, PressLayout, calc_press_jacobian, calc_projection, press_residual_fn, projection_at, scan_site_onsets
 from ._press_data import PressLog, site_responses
 from ._press_projection import calc_elastic, solve_baselines, solve_linear
 from ._solve import solve_least_squares
@@ -43,7 +44,9 @@ def _initial_x(layout: PressLayout, logs: list[PressLog], lag: float = 0.0, star
     step = float(np.median(np.concatenate([np.diff(log.times) for log in logs])))
     durations = np.concatenate([_press_durations(log) for log in logs])
     k = layout.num_terms
-    taus = np.geomspace(4 * step, max(float(np.median(durations)), 40 * step), k + 2)[1:-1] * start[0]
+    on = k if layout.active is None else int(np.sum(np.asarray(layout.active) > 0.0))  # the terms on come first
+    taus = np.geomspace(4 * step, max(float(np.median(durations)), 40 * step), on + 2)[1:-1] * start[0]
+    taus = np.concatenate([taus, np.full(k - on, taus[-1] if on else 1.0)])  # a term that is off: any finite τ
     parts = [np.log(np.full(k, start[1])), np.log(taus), np.zeros(sum(layout.num_presses))]
     if layout.estimate_lag:
         parts.append(np.full(len(logs), math.atanh(float(lag) / LAG_BOUND)))
@@ -76,20 +79,27 @@ def _own_residuals(datas, bases, contact, amplitudes):
 
 
 @eqx.filter_jit
-def _press_outputs(layout, x, args):
-    """At x: (the weighted residuals per log, baselines, amplitudes) and the
-    Jacobian. The residuals are the model's own, as `compare` predicts a log: the
-    baseline + max(0, Σ A B) in contact, each log's baseline solved given the
-    amplitudes. The solver's projection found where the elastic part pushes from the
-    amplitudes of a pass before, and where that cut a push off, the law was left
-    free; so the amplitudes are those of the projection or of up to POLISH_PASSES
-    further passes (each solved where the one before pushes), whichever gives each
-    channel the lowest own χ²."""
-    _, jacobian, amplitudes, bases, contact, sensitivity = calc_press_jacobian(layout, x, args, linear=True)
+def press_outputs(layout, x, args, jacobian=True):
+    """At x: (the weighted residuals per log, baselines, amplitudes) and (with
+    `jacobian`; else None for both) the Jacobian and the amplitudes' sensitivity. The
+    residuals are the model's own, as `compare` predicts a log: the baseline + max(0,
+    Σ A B) in contact, each log's baseline solved given the amplitudes. The solver's
+    projection found where the elastic part pushes from the amplitudes of a pass
+    before, and where that cut a push off, the law was left free; so the amplitudes
+    are those of the projection or of up to POLISH_PASSES further passes (each solved
+    where the one before pushes), whichever gives each channel the lowest own χ².
+    Without the Jacobian (the term counts `terms="auto"` compares) it compiles in a
+    third of the time."""
     datas = args[0]
-    best = (amplitudes, *_own_residuals(datas, bases, contact, amplitudes))
+    if jacobian:
+        _, jacobian, amplitudes, bases, contact, sensitivity = calc_press_jacobian(layout, x, args, linear=True)
+    else:
+        _, _, amplitudes, _, contact, bases = calc_projection(*layout.unpack(x, *args[1:]), datas)
+        jacobian = sensitivity = None
     touching = [jnp.broadcast_to(c[:, None], data.observed.shape) for c, data in zip(contact, datas)]
-    for _ in range(POLISH_PASSES):
+
+    def polish(_, carry):  # a loop, not unrolled: the passes compile once
+        amplitudes, best = carry
         actives = [t & (jnp.einsum("tsj,csj->tc", basis, amplitudes) > 0.0) for t, basis in zip(touching, bases)]
         amplitudes = solve_linear(bases, datas, actives, contact)[1]
         residuals, baselines = _own_residuals(datas, bases, contact, amplitudes)
@@ -99,7 +109,10 @@ def _press_outputs(layout, x, args):
             [jnp.where(better[None, :], r, old) for r, old in zip(residuals, best[1])],
             [jnp.where(better[:, None], b, old) for b, old in zip(baselines, best[2])],
         )
-    amplitudes, residuals, baselines = best
+        return amplitudes, best
+
+    best = (amplitudes, *_own_residuals(datas, bases, contact, amplitudes))
+    amplitudes, residuals, baselines = jax.lax.fori_loop(0, POLISH_PASSES, polish, (amplitudes, best))[1]
     return (residuals, baselines, amplitudes), jacobian, sensitivity
 
 
@@ -124,10 +137,11 @@ def _solver_chi_square(layout, x, args) -> float:
     return float(projection_at(layout, x, args)[0])
 
 
-def _solve_from(layout: PressLayout, solver, max_steps: int, x0, args):
-    """The solve from x0, unscanned: (solution, outputs, (own χ², solver's χ²))."""
+def _solve_from(layout: PressLayout, solver, max_steps: int, x0, args, jacobian=True):
+    """The solve from x0, unscanned: (solution, outputs (:func:`press_outputs`, with
+    or without the Jacobian), (own χ², solver's χ²))."""
     solution = _solve_press(layout, solver, max_steps, x0, args)
-    outputs = _press_outputs(layout, solution.value, args)
+    outputs = press_outputs(layout, solution.value, args, jacobian)
     return solution, outputs, (_own_chi_square(outputs), _solver_chi_square(layout, solution.value, args))
 
 
@@ -139,7 +153,7 @@ def solve_press_scanned(layout: PressLayout, solver, max_steps: int, x0, args, s
     ONSET_RESCAN_MIN_GAIN (times the χ² per residual, where above 1): a site's onsets
     and its law nearly trade, and the solver alone can end with every press at a
     site early by the same amount.
-    Returns (the solution, its outputs (:func:`_press_outputs`), (its own χ², the
+    Returns (the solution, its outputs (:func:`press_outputs`), (its own χ², the
     solver's χ²))."""
     num_residuals = max(1, sum(int(jnp.sum(data.weights > 0.0)) for data in args[0]))
     solution, outputs, (chi_square, cost) = solved if solved is not None else _solve_from(layout, solver, max_steps, x0, args)
@@ -149,7 +163,7 @@ def solve_press_scanned(layout: PressLayout, solver, max_steps: int, x0, args, s
         if not scanned < cost * (1.0 - 1e-6):
             break
         rescanned = _solve_press(layout, solver, max_steps, x, args)
-        rescanned_outputs = _press_outputs(layout, rescanned.value, args)
+        rescanned_outputs = press_outputs(layout, rescanned.value, args)
         rescanned_chi_square = _own_chi_square(rescanned_outputs)
         if not rescanned_chi_square < chi_square - ONSET_RESCAN_MIN_GAIN * max(1.0, chi_square / num_residuals):
             break
@@ -157,10 +171,13 @@ def solve_press_scanned(layout: PressLayout, solver, max_steps: int, x0, args, s
     return solution, outputs, (chi_square, cost)
 
 
-def fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps, starts, num_used, num_linear, scan=True):
+def fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps, starts, num_used, num_linear, scan=True, padded_to=None):
     """Fit `num_terms` terms from the shape starts in turn, then (with `scan`) scan
     the best one's site onsets (:func:`solve_press_scanned`; once, not after every
-    start's solve: the scan judges every site's 25 shifts).
+    start's solve: the scan judges every site's 25 shifts). Without `scan`, the
+    outputs have no Jacobian (None): what a comparison of term counts needs.
+    With `padded_to` K ≥ num_terms, the layout holds K terms, the first num_terms on
+    (PressLayout.active): every count then runs the same compiled programs.
     starts "auto": the next start is tried while the best own reduced χ² is above
     RESTART_REDUCED_CHI2, unless two starts have ended within RESTART_SAME_MINIMUM of
     each other's χ² (the same minimum from two shapes: what is left is the model's
@@ -168,18 +185,22 @@ def fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps, 
     N. The best start is one that converged, if any did, with the lowest own χ².
     Returns (the layout, args, solution, (own χ², solver's χ²), outputs, the number
     of starts tried)."""
-    layout = PressLayout(num_terms, tuple(len(log.onset_start) for log in logs), estimate_lag)
+    presses = tuple(len(log.onset_start) for log in logs)
+    if padded_to is None:
+        layout = PressLayout(num_terms, presses, estimate_lag)
+    else:
+        layout = PressLayout(padded_to, presses, estimate_lag, jnp.asarray(np.arange(padded_to) < num_terms, jnp.float64))
     responds = site_responses(logs, num_sites)
     datas = tuple(log.to_data(num_sites, responds) for log in logs)
     args = (datas, tuple(jnp.asarray(log.onset_start) for log in logs), tuple(jnp.asarray(float(lag)) for _ in logs))
-    dof = max(num_used - layout.size - num_linear, 1)
+    dof = max(num_used - layout.without_inactive()[0].size - num_linear, 1)
     best, tried = None, 0
     candidates = SHAPE_STARTS if starts == "auto" else SHAPE_STARTS[:starts]
     ends = []
     for start in candidates if num_terms else candidates[:1]:  # no terms, no shape to start
         tried += 1
         doing(f"the lumped fit's solve ({num_terms} Prony terms, start {tried} of at most {len(candidates)})")
-        solved = _solve_from(layout, solver, max_steps, jnp.asarray(_initial_x(layout, logs, lag, start)), args)
+        solved = _solve_from(layout, solver, max_steps, jnp.asarray(_initial_x(layout, logs, lag, start)), args, jacobian=scan)
         ends.append(solved[2][0])
         # A solve that converged beats one stopped at its step cap (on a flat valley of
         # a term the logs cannot tell, still creeping), then the lower own χ².
