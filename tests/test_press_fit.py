@@ -334,6 +334,34 @@ def test_a_press_deeper_than_any_fitted_is_predicted_past_the_laws_reach(stand_i
         assert channel["rms_Pa"] < 40.0, (name, channel)
 
 
+class _Stopped(Exception):
+    pass
+
+
+def test_a_solver_chosen_by_name_steps_with_the_press_models_xtol(stand_in, tmp_path, monkeypatch):
+    """The default or a named Levenberg-Marquardt (the command line's --solver lm)
+    stops at PRESS_XTOL, through fit_press_logs and through fit_logs; a solver
+    object is used as given."""
+    from hydrotact.sysid import _press_fit as press_fit_module, fit_logs, make_solver
+
+    seen = []
+
+    def spy(count, logs, num_sites, estimate_lag, lag, solver, *rest, **keywords):
+        seen.append(solver)
+        raise _Stopped
+
+    monkeypatch.setattr(press_fit_module, "fit_terms", spy)
+    path, log, _ = stand_in["calibration"][0]
+    own = make_solver("lm")
+    for solver in (None, "lm", own):
+        with pytest.raises(_Stopped):
+            fit_press_logs([log], [str(path)], terms=2, solver=solver)
+    with pytest.raises(_Stopped):
+        fit_logs([path], tmp_path / "fit", lumped=True, terms=2, solver="lm")
+    assert [s.xtol for s in seen] == [press_fit_module.PRESS_XTOL, press_fit_module.PRESS_XTOL, own.xtol, press_fit_module.PRESS_XTOL]
+    assert press_fit_module.PRESS_XTOL != own.xtol
+
+
 def test_fit_and_compare_from_the_command_line(stand_in, tmp_path, capsys):
     """--terms auto (the default) picks the stand-in's two terms by BIC from fits of
     1-3 (one compiled program, the terms past each count off), and the fit is

@@ -110,13 +110,14 @@ def fit_logs(
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     output = check_output(output, directory=True, what="the fit")
+    given = solver
     if solver is None or isinstance(solver, str):
         solver = make_solver(solver or "lm")
     name = solver_name(solver)
     terms = parse_terms(terms)
-    if lumped:
+    if lumped:  # the solver as given: a named one steps with the press model's settings
         options = dict(press_options or {}, **({"max_steps": max_steps} if max_steps is not None else {}))
-        return _fit_press_files(paths, output, sensor, indentation, mapping, terms, solver, tare, plot, options)
+        return _fit_press_files(paths, output, sensor, indentation, mapping, terms, given, tare, plot, options)
     logs = read_logs([Path(p) for p in paths], mapping, sensor)
     for log, path in zip(logs, paths):  # every log checked before the first is simulated
         check_pose_columns(log, str(path))

@@ -79,7 +79,7 @@ def _own_residuals(datas, bases, contact, amplitudes):
 
 
 @eqx.filter_jit
-def press_outputs(layout, x, args, jacobian=True):
+def press_outputs(layout, x, args, jacobian):
     """At x: (the weighted residuals per log, baselines, amplitudes) and (with
     `jacobian`; else None for both) the Jacobian and the amplitudes' sensitivity. The
     residuals are the model's own, as `compare` predicts a log: the baseline + max(0,
@@ -89,7 +89,9 @@ def press_outputs(layout, x, args, jacobian=True):
     are those of the projection or of up to POLISH_PASSES further passes (each solved
     where the one before pushes), whichever gives each channel the lowest own χ².
     Without the Jacobian (the term counts `terms="auto"` compares) it compiles in a
-    third of the time."""
+    third of the time. `jacobian` has no default: every caller passes it the same
+    way, since a default and an explicit True are two entries of the compilation
+    cache (a 3-log fit compiled this function twice, 6 s)."""
     datas = args[0]
     if jacobian:
         _, jacobian, amplitudes, bases, contact, sensitivity = calc_press_jacobian(layout, x, args, linear=True)
@@ -163,7 +165,7 @@ def solve_press_scanned(layout: PressLayout, solver, max_steps: int, x0, args, s
         if not scanned < cost * (1.0 - 1e-6):
             break
         rescanned = _solve_press(layout, solver, max_steps, x, args)
-        rescanned_outputs = press_outputs(layout, rescanned.value, args)
+        rescanned_outputs = press_outputs(layout, rescanned.value, args, True)
         rescanned_chi_square = _own_chi_square(rescanned_outputs)
         if not rescanned_chi_square < chi_square - ONSET_RESCAN_MIN_GAIN * max(1.0, chi_square / num_residuals):
             break
