@@ -10,7 +10,19 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from hydrotact.sysid._lumped import LAG_BOUND, ONSET_HALF_RANGE, PressLayout, calc_press_jacobian, calc_press_predictions, calc_press_residuals, press_residual_fn
+from hydrotact.sysid._lumped import (
+    LAG_BOUND,
+    ONSET_HALF_RANGE,
+    ONSET_SCAN,
+    PressLayout,
+    _site_scan,
+    calc_press_jacobian,
+    calc_press_predictions,
+    calc_press_residuals,
+    press_residual_fn,
+    projection_at,
+    scan_constants,
+)
 from hydrotact.sysid._press_data import drift_basis
 from hydrotact.sysid._press_solve import solve_press_scanned
 from hydrotact.sysid._press_windows import CONTINUATION_POWER, DEPTH_SCALE, POWERS, _law_inputs, calc_bases, calc_depths, calc_site_bases, make_press_data, window_decay
@@ -205,6 +217,30 @@ def test_the_site_onset_scan_leaves_a_minimum_where_a_sites_presses_all_start_ea
     assert cost(scanned.value) < cost(truth.value) + 1e-3 * num_residuals
     np.testing.assert_allclose(np.asarray(layout.unpack(scanned.value, (start,), (0.0,))[1][0]), onsets, atol=0.03e-3)
     assert np.all(np.abs(np.asarray(layout.unpack(alone.value, (start,), (0.0,))[1][0]) - onsets)[::3] > 0.1e-3)  # site 0's presses
+
+
+def test_the_scans_projected_baselines_give_the_refitted_chi_square():
+    """The onset scan projects each log's baseline out of a shift's solve (its Gram
+    matrix inverted once per scan) instead of refitting it with the site's law: the
+    same χ² for every shift of every site, to rounding, on the trap's log."""
+    rng = np.random.default_rng(1)
+    num_presses = 6
+    data, onsets, _, _ = _model_log(rng, 1600, num_presses, 3, 2, 10.0)
+    assert data.drift_from == "all"
+    layout = PressLayout(2, (num_presses,), True)
+    start = jnp.asarray(onsets - 150e-6 * (np.asarray(data.press_site) == 0))
+    x = jnp.concatenate([jnp.log(jnp.asarray([0.1, 0.15])), jnp.log(jnp.asarray([0.5, 5.0])), jnp.zeros(num_presses), jnp.atleast_1d(jnp.arctanh(0.05 / LAG_BOUND))])
+    args = ((data,), (start,), (0.0,))
+    projection = projection_at(layout, x, args)[1]
+    held = scan_constants(layout, x, args)
+    offsets = jnp.asarray(ONSET_SCAN)
+    for site in range(3):
+        projected = np.asarray(_site_scan(layout, x, args, jnp.asarray(site), offsets, projection, held, True))
+        refitted = np.asarray(_site_scan(layout, x, args, jnp.asarray(site), offsets, projection, held, False))
+        assert np.array_equal(np.isfinite(projected), np.isfinite(refitted)) and np.isfinite(refitted).sum() > 10
+        finite = np.isfinite(refitted)
+        np.testing.assert_allclose(projected[finite], refitted[finite], rtol=1e-7, atol=1e-6)  # the ridges differ (1e-12 of other matrices)
+        assert np.ptp(refitted[finite]) > 10.0  # the shifts do move the χ²
 
 
 @pytest.mark.parametrize("drift_from", ["unloaded", "all"])

@@ -97,6 +97,27 @@ def apply_inverse(factors, scale, rhs):
     return lu_solve(factors, rhs / scale) / scale
 
 
+def solve_scaled(normal, rhs):
+    """normal⁻¹ rhs per channel (C, N, N), (C, N), Jacobi scaled and ridged as the
+    projection's normal matrix is (a row of zeros gives 0)."""
+    factors, scale = _factor(normal)
+    return apply_inverse(factors, scale, rhs)
+
+
+def baseline_inverses(datas):
+    """Per log (C, D, D) the inverse of its weighted baseline columns' Gram matrix over
+    every sample (Jacobi scaled and ridged as the projection's): with the baseline
+    learned over the whole log (PressData.drift_from "all"), what projects it out of
+    a solve whose other columns move (the onset scan's) without refitting it."""
+    out = []
+    for data in datas:
+        drift = data.baseline[None, :, :] * data.weights.T[:, :, None]  # (C, T, D)
+        factors, scale = _factor(jnp.einsum("ctd,cte->cde", drift, drift))
+        identity = jnp.broadcast_to(jnp.eye(drift.shape[2], dtype=drift.dtype)[:, None, :], (drift.shape[2], drift.shape[0], drift.shape[2]))
+        out.append(jnp.transpose(jax.vmap(apply_inverse, in_axes=(None, None, 0))(factors, scale, identity), (1, 2, 0)))
+    return out
+
+
 def _fitted(weighted, blocks, coefficients):
     """Per log (C, T): Φ g for coefficients g (C, N)."""
     sizes, first, num_baseline = blocks
