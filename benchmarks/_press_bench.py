@@ -46,11 +46,11 @@ import scipy.optimize
 from hydrotact.data import read_log, write_log
 from hydrotact.sim import FINGERTIP_SENSOR, StageSession, simulate_stage_log
 from hydrotact.sysid import fit_press_logs
-from hydrotact.sysid._lumped import LAG_BOUND, ONSET_HALF_RANGE, PressLayout, press_residual_fn
-from hydrotact.sysid._press_data import prepare_press_logs, site_responses
-from hydrotact.sysid._press_projection import ACTIVE_PASSES, RIDGE
-from hydrotact.sysid._press_solve import _initial_x
-from hydrotact.sysid._press_windows import DEPTH_SCALE, POWERS
+from hydrotact.sysid.lumped._lumped import LAG_BOUND, ONSET_HALF_RANGE, PressLayout, press_residual_fn
+from hydrotact.sysid.lumped._press_data import prepare_press_logs, site_responses
+from hydrotact.sysid.lumped._press_projection import ACTIVE_PASSES, RIDGE
+from hydrotact.sysid.lumped._press_solve import _initial_x
+from hydrotact.sysid.lumped._press_windows import DEPTH_SCALE, POWERS
 from hydrotact.visco import Prony
 
 MATERIAL = Prony(jnp.asarray(150e3), jnp.asarray([20e3, 15e3, 10e3]), jnp.asarray([0.4, 3.0, 20.0]))

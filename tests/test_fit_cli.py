@@ -577,3 +577,25 @@ def test_simulate_barometer_options_need_barometer(tmp_path, capsys, flag):
     output = tmp_path / "log.parquet"
     args = ["simulate", "--sensor", "pad5x5", "--probe", "cylinder:d=2mm", "--trajectory", trajectory, "--units", "mm", *flag, "-o", output]
     _assert_error_and_nothing_written(capsys, tmp_path, args, [flag[0], "--barometer"])
+
+
+def test_fit_logs_takes_its_method_as_a_settings_object(lumped_parquet, tmp_path):
+    """fit_logs(method=SimulatorFit(...) | LumpedFit(...)): the lumped fit through its
+    method object writes what `fit --lumped` does; anything else is refused before a
+    file is written; the methods hold settings only (frozen)."""
+    import dataclasses
+
+    from hydrotact import HydrotactError
+    from hydrotact.sysid import LumpedFit, SimulatorFit, fit_logs
+
+    with pytest.raises(HydrotactError, match=r"method: expected SimulatorFit\(...\) or LumpedFit\(...\), got 'lumped'"):
+        fit_logs([lumped_parquet], tmp_path / "refused", method="lumped")
+    assert not (tmp_path / "refused").exists()
+    for method in (SimulatorFit(), LumpedFit()):
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            method.sensor = "pad5x5"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        report = fit_logs([lumped_parquet], tmp_path / "fit", method=LumpedFit(estimate_lag=True), terms=1)
+    assert report["mode"] == "lumped" and report["num_terms"] == 1 and (tmp_path / "fit" / "material.json").is_file()
+    assert report["logs"][0]["lag_s"]["std"] > 0.0  # estimated (LumpedFit's estimate_lag reached the fit); a given lag has none

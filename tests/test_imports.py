@@ -5,6 +5,8 @@ inside functions count too, absolute or relative.
 """
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -66,6 +68,27 @@ def test_no_stage_imports_cli_or_viz(stage):
         if _is_forbidden(module)
     ]
     assert not offenders, "a stage imports the command line or viz:\n" + "\n".join(offenders)
+
+
+def test_the_lumped_model_imports_nothing_private_from_its_parent():
+    """hydrotact.sysid.lumped takes what it shares with the simulator fit from
+    hydrotact.sysid.shared (public names), never a private module or name of sysid."""
+    lumped = PACKAGE / "sysid" / "lumped"
+    offenders = []
+    for path in sorted(lumped.rglob("*.py")):
+        for line, module in _imported_modules(path):
+            if module.startswith("hydrotact.sysid.") and not module.startswith("hydrotact.sysid.lumped"):
+                if any(part.startswith("_") for part in module.split(".")[2:]):
+                    offenders.append(f"{path.relative_to(PACKAGE.parent)}:{line}: {module}")
+    assert not offenders, "the lumped package reaches into its parent:\n" + "\n".join(offenders)
+    assert len(list(lumped.glob("_*.py"))) >= 10
+    # Importing sysid shows the lumped model as one sub-package, none of its modules.
+    shown = subprocess.run(
+        [sys.executable, "-c", "import hydrotact.sysid as s; print(' '.join(n for n in dir(s) if not n.startswith('__')))"],
+        capture_output=True, text=True, check=True,
+    ).stdout.split()
+    assert "lumped" in shown and "fit_press_logs" in shown and "LumpedFit" in shown
+    assert not [name for name in shown if name.startswith(("_press", "_lumped", "_compare", "_prediction", "_presses"))], shown
 
 
 def test_the_checker_sees_relative_and_nested_imports():

@@ -10,7 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from hydrotact.sysid._lumped import (
+from hydrotact.sysid._solve import solve_least_squares
+from hydrotact.sysid.lumped._lumped import (
     LAG_BOUND,
     ONSET_HALF_RANGE,
     ONSET_SCAN,
@@ -23,10 +24,9 @@ from hydrotact.sysid._lumped import (
     projection_at,
     scan_constants,
 )
-from hydrotact.sysid._press_data import drift_basis
-from hydrotact.sysid._press_solve import solve_press_scanned
-from hydrotact.sysid._press_windows import CONTINUATION_POWER, DEPTH_SCALE, POWERS, _law_inputs, calc_bases, calc_depths, calc_site_bases, make_press_data, window_decay
-from hydrotact.sysid._solve import solve_least_squares
+from hydrotact.sysid.lumped._press_data import drift_basis
+from hydrotact.sysid.lumped._press_solve import solve_press_scanned
+from hydrotact.sysid.lumped._press_windows import CONTINUATION_POWER, DEPTH_SCALE, POWERS, _law_inputs, calc_bases, calc_depths, calc_site_bases, make_press_data, window_decay
 from hydrotact.visco import Prony, calc_hereditary_integral
 
 SHAPE = Prony(jnp.asarray(1.0), jnp.asarray([0.1, 0.15]), jnp.asarray([0.5, 5.0]))
@@ -331,7 +331,7 @@ def test_batched_solves_run_one_matrix_at_a_time_and_never_deadlock():
 
     from helpers import batched_lapack_calls
 
-    from hydrotact.sysid._press_projection import solve_baselines
+    from hydrotact.sysid.lumped._press_projection import solve_baselines
 
     started = time.perf_counter()
     done = subprocess.run([sys.executable, "-c", CONCURRENT_SOLVES, "hydrotact"], capture_output=True, text=True, timeout=120)

@@ -22,9 +22,10 @@ from hydrotact import HydrotactError, HydrotactWarning
 from hydrotact.cli import main
 from hydrotact.data import write_log
 from hydrotact.sim import FINGERTIP_SENSOR, StageSession, make_site_grid, simulate_stage_log
-from hydrotact.sysid import _press_solve as press_solve_module, compare_fit, fit_press_logs, write_press_fit_outputs
-from hydrotact.sysid._press_data import SITE_RESPONSE_SNR, find_kinks, site_responses
-from hydrotact.sysid._press_windows import calc_depths
+from hydrotact.sysid import compare_fit, fit_press_logs, write_press_fit_outputs
+from hydrotact.sysid.lumped import _press_solve as press_solve_module
+from hydrotact.sysid.lumped._press_data import SITE_RESPONSE_SNR, find_kinks, site_responses
+from hydrotact.sysid.lumped._press_windows import calc_depths
 from hydrotact.visco import Prony
 
 MATERIAL = Prony(jnp.asarray(150e3), jnp.asarray([18e3, 22e3]), jnp.asarray([0.5, 5.0]))
@@ -342,7 +343,8 @@ def test_a_solver_chosen_by_name_steps_with_the_press_models_xtol(stand_in, tmp_
     """The default or a named Levenberg-Marquardt (the command line's --solver lm)
     stops at PRESS_XTOL, through fit_press_logs and through fit_logs; a solver
     object is used as given."""
-    from hydrotact.sysid import _press_fit as press_fit_module, fit_logs, make_solver
+    from hydrotact.sysid import LumpedFit, fit_logs, make_solver
+    from hydrotact.sysid.lumped import _press_fit as press_fit_module
 
     seen = []
 
@@ -357,7 +359,7 @@ def test_a_solver_chosen_by_name_steps_with_the_press_models_xtol(stand_in, tmp_
         with pytest.raises(_Stopped):
             fit_press_logs([log], [str(path)], terms=2, solver=solver)
     with pytest.raises(_Stopped):
-        fit_logs([path], tmp_path / "fit", lumped=True, terms=2, solver="lm")
+        fit_logs([path], tmp_path / "fit", method=LumpedFit(), terms=2, solver="lm")
     assert [s.xtol for s in seen] == [press_fit_module.PRESS_XTOL, press_fit_module.PRESS_XTOL, own.xtol, press_fit_module.PRESS_XTOL]
     assert press_fit_module.PRESS_XTOL != own.xtol
 
@@ -429,7 +431,7 @@ def test_the_prediction_band_derivatives_match_finite_differences(one_log_fit, s
     δ^-0.5, has one-sided differences 1.3 % apart at a 20 nm step and the derivative
     their mean to 5 digits (one entry, in a site's onset: the test failed there from
     2026-12-02, marked xfail, until this case was told from a kink)."""
-    from hydrotact.sysid import _compare
+    from hydrotact.sysid.lumped import _compare
 
     fit, _, _ = one_log_fit
     write_press_fit_outputs(fit, tmp_path / "fit", paths=[str(stand_in["calibration"][0][0])])

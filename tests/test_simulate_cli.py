@@ -353,7 +353,7 @@ def test_interrupted_fit_of_many_logs_resumes(tmp_path, monkeypatch):
     """A full fit of three logs interrupted inside the second log's unit responses
     resumes there: the first log's come from the cache, the second's finished blocks
     from its partial file beside the cache entry; the fit equals an uninterrupted one."""
-    from hydrotact.sysid import fit_logs
+    from hydrotact.sysid import SimulatorFit, fit_logs
 
     paths = []
     for k, shift in enumerate((0.0, 1.1e-3, -1.1e-3)):
@@ -366,7 +366,7 @@ def test_interrupted_fit_of_many_logs_resumes(tmp_path, monkeypatch):
     def fit(folder, cache, counting):
         monkeypatch.setenv("HYDROTACT_CACHE_DIR", str(tmp_path / cache))
         monkeypatch.setattr(host, "compute_unit_responses", counting)
-        return fit_logs(paths, tmp_path / folder, terms=0, progress=False)
+        return fit_logs(paths, tmp_path / folder, method=SimulatorFit(progress=False), terms=0)
 
     interrupted = _Counting(fail_on=blocks_per_log + 2)  # the first log done, one block of the second saved
     with pytest.raises(KeyboardInterrupt):

@@ -72,7 +72,7 @@ def run_demo(out_dir, progress: bool = True, smoke: bool = False) -> dict:
     (0.3 s, 3 s), 16 rays: the same job at test-suite size."""
     from ..data import make_material_document, material_prony, write_material
     from ..sim import BarometerSettings, make_trajectory, simulate_log
-    from ..sysid import fit_logs
+    from ..sysid import SimulatorFit, fit_logs
     from ..viz import plot_fit
     from .fit import print_fit_table
     from .simulate import write_simulated_log
@@ -101,7 +101,7 @@ def run_demo(out_dir, progress: bool = True, smoke: bool = False) -> dict:
     log_path = out_dir / "demo_log.parquet"
     simulated = write_simulated_log(log, samples, log_path, out_dir / "demo_log.png")
     # step 4 is what a user runs on their own log: `hydrotact fit demo_log.parquet`
-    report = fit_logs([log_path], out_dir / "fit", terms=2 if smoke else "auto", progress=progress, plot=plot_fit)
+    report = fit_logs([log_path], out_dir / "fit", method=SimulatorFit(progress=progress), terms=2 if smoke else "auto", plot=plot_fit)
     gains = {f"pad5x5/{name}": g for name, g in zip(log.metadata["channels"], log.metadata["barometer"]["gains"])}
     truth_numbers = {**truth_numbers, "instantaneous_modulus": truth_numbers["long_term_modulus"] + sum(truth_numbers["moduli"]), "gains": gains}
     print_fit_table(report, truth_numbers)

@@ -68,20 +68,20 @@ def add_parser(subparsers):
 
 
 def run(args) -> None:
-    from ..sysid import fit_logs, parse_drift, parse_starts
+    from ..sysid import LumpedFit, SimulatorFit, fit_logs, parse_drift, parse_starts
     from ..viz import plot_fit, plot_press_fit
 
-    press_options = None
     if args.lumped:
-        press_options = {
-            "position_columns": tuple(name for name in args.position_columns.split(",") if name), "drift": parse_drift(args.drift), "drift_from": args.drift_from, "lag": args.lag,
-            "estimate_lag": args.estimate_lag, "saturation_pa": args.saturation, "threshold": args.press_threshold,
-            "starts": parse_starts(args.starts),
-        }
+        method = LumpedFit(
+            sensor=args.sensor, indentation=args.indentation, position_columns=tuple(name for name in args.position_columns.split(",") if name),
+            drift=parse_drift(args.drift), drift_from=args.drift_from, lag=args.lag, estimate_lag=args.estimate_lag, saturation_pa=args.saturation,
+            threshold=args.press_threshold, starts=parse_starts(args.starts),
+        )
+    else:
+        method = SimulatorFit(sensor=args.sensor, field=args.field, num_rays=args.rays, progress=not args.json)
     report = fit_logs(
-        args.logs, args.output, sensor=args.sensor, lumped=args.lumped, indentation=args.indentation, mapping=args.mapping,
-        terms=args.terms, solver=args.solver, tare=args.tare, field=args.field, num_rays=args.rays, progress=not args.json,
-        plot=plot_press_fit if args.lumped else plot_fit, press_options=press_options, max_steps=args.max_steps,
+        args.logs, args.output, method=method, mapping=args.mapping, terms=args.terms, solver=args.solver, tare=args.tare,
+        plot=plot_press_fit if args.lumped else plot_fit, max_steps=args.max_steps,
     )
     if args.json:
         print(json.dumps(report, indent=2))

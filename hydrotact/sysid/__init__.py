@@ -1,7 +1,8 @@
 """System identification: fit the elastomer's Prony material, channel gains and
-offsets to barometer logs, with uncertainties and a report."""
+offsets to barometer logs, with uncertainties and a report. Two ways: the simulator
+fit (here) and the lumped press model for stage logs (:mod:`.lumped`, re-exported);
+what they share is public in :mod:`.shared`."""
 
-from ._compare import Comparison as Comparison, compare_fit as compare_fit, compare_log as compare_log, read_fit as read_fit
 from ._fit import (
     MAX_AUTO_TERMS as MAX_AUTO_TERMS,
     Estimate as Estimate,
@@ -11,17 +12,8 @@ from ._fit import (
     fit_problem as fit_problem,
     make_initial_guess as make_initial_guess,
 )
-from ._fit_logs import fit_logs as fit_logs, parse_terms as parse_terms, read_logs as read_logs
+from ._fit_logs import SimulatorFit as SimulatorFit, fit_logs as fit_logs, parse_terms as parse_terms, read_logs as read_logs
 from ._model import ParameterLayout as ParameterLayout, calc_predictions as calc_predictions, calc_residuals as calc_residuals
-from ._press_data import parse_drift as parse_drift
-from ._press_fit import Parameter as Parameter, PressFit as PressFit, fit_press_logs as fit_press_logs, parse_starts as parse_starts
-from ._press_report import write_press_fit_outputs as write_press_fit_outputs
-from ._presses import (
-    Presses as Presses,
-    find_log_presses as find_log_presses,
-    find_presses as find_presses,
-    group_sites as group_sites,
-)
 from ._problem import FitProblem as FitProblem, LogArrays as LogArrays, make_fit_problem as make_fit_problem
 from ._relaxation import RelaxationFit as RelaxationFit, fit_relaxation_curve as fit_relaxation_curve
 from ._report import (
@@ -38,4 +30,21 @@ from ._solve import (
     make_solver as make_solver,
     solve_least_squares as solve_least_squares,
     solver_name as solver_name,
+)
+from .lumped import (
+    Comparison as Comparison,
+    LumpedFit as LumpedFit,
+    Parameter as Parameter,
+    Presses as Presses,
+    PressFit as PressFit,
+    compare_fit as compare_fit,
+    compare_log as compare_log,
+    find_log_presses as find_log_presses,
+    find_presses as find_presses,
+    fit_press_logs as fit_press_logs,
+    group_sites as group_sites,
+    parse_drift as parse_drift,
+    parse_starts as parse_starts,
+    read_fit as read_fit,
+    write_press_fit_outputs as write_press_fit_outputs,
 )

@@ -7,6 +7,7 @@ Unit responses of full-mode fits are cached (they are the expensive part), so a 
 fit of the same logs with other options starts at once.
 """
 
+import dataclasses
 import math
 import warnings
 from pathlib import Path
@@ -91,33 +92,51 @@ def read_logs(paths, mapping=None, sensor=None, require_sensor: bool = True):
     return logs
 
 
-def fit_logs(
-    paths, output, *, sensor=None, lumped=False, indentation="indentation", mapping=None, terms="auto", solver=None, tare=False,
-    field=None, num_rays=None, progress=True, plot=None, press_options=None, max_steps=None,
-) -> dict:
-    """Fit the logs at `paths` and write material.json, report.json (and, with `plot`,
-    the pictures) into `output`. With `tare`, each log is first tared on its no-load
-    segments (found automatically; the baseline interpolated in time between them),
-    which takes out the slow drift of aged sensors that constant offsets cannot.
-    `plot(result, output) -> {name: path}` draws the pictures (the command line passes
-    `hydrotact.viz.plot_fit`; the stage draws nothing itself). `solver` is a solver
-    object (default: Levenberg–Marquardt) or the name of one of SOLVERS. A `lumped`
-    fit is the press model of :func:`fit_press_logs` (`press_options` its keyword
-    arguments: position_columns, drift, drift_from, lag, estimate_lag, saturation_pa, threshold, starts);
-    `plot` then draws a PressFit. `max_steps` caps the solver's steps. What may
-    mislead (clipped readings, a poor χ², parameters the logs cannot identify) is
-    issued as a :class:`HydrotactWarning`. Returns the report (with `files`)."""
+@dataclasses.dataclass(frozen=True)
+class SimulatorFit:
+    """The simulator fit as :func:`fit_logs`'s `method` (settings only; the default,
+    the command line's `fit` without --lumped): the logs' `sensor` (a built-in name
+    or a spec file) where their metadata names none, the strain `field` and the
+    taxels' `num_rays` (default: the logs' own), and whether to show `progress`."""
+
+    sensor: str | None = None
+    field: str | None = None
+    num_rays: int | None = None
+    progress: bool = True
+
+
+def fit_logs(paths, output, *, method=None, terms="auto", solver=None, tare=False, mapping=None, plot=None, max_steps=None) -> dict:
+    """Fit the logs at `paths` with `method` and write material.json, report.json
+    (and, with `plot`, the pictures) into `output`. `method` is a
+    :class:`SimulatorFit` (the default: the sensor simulated, its material's Prony
+    terms, gains and offsets fitted) or a :class:`hydrotact.sysid.lumped.LumpedFit`
+    (the lumped press model of :func:`fit_press_logs`, for stage logs; `plot` then
+    draws a PressFit), each holding its own settings. With `tare`, each log is first
+    tared on its no-load segments (found automatically; the baseline interpolated in
+    time between them), which takes out the slow drift of aged sensors that constant
+    offsets cannot (simulator fits only). `plot(result, output) -> {name: path}`
+    draws the pictures (the command line passes `hydrotact.viz.plot_fit`; the stage
+    draws nothing itself). `solver` is a solver object (default:
+    Levenberg–Marquardt) or the name of one of SOLVERS; `mapping` a column mapping
+    for logs in other formats; `max_steps` caps the solver's steps. What may mislead
+    (clipped readings, a poor χ², parameters the logs cannot identify) is issued as
+    a :class:`HydrotactWarning`. Returns the report (with `files`)."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
+    from .lumped import LumpedFit
+
+    method = SimulatorFit() if method is None else method
+    if not isinstance(method, (SimulatorFit, LumpedFit)):
+        raise HydrotactError(f"method: expected SimulatorFit(...) or LumpedFit(...), got {method!r}")
     output = check_output(output, directory=True, what="the fit")
     given = solver
     if solver is None or isinstance(solver, str):
         solver = make_solver(solver or "lm")
     name = solver_name(solver)
     terms = parse_terms(terms)
-    if lumped:  # the solver as given: a named one steps with the press model's settings
-        options = dict(press_options or {}, **({"max_steps": max_steps} if max_steps is not None else {}))
-        return _fit_press_files(paths, output, sensor, indentation, mapping, terms, given, tare, plot, options)
+    if isinstance(method, LumpedFit):  # the solver as given: a named one steps with the press model's settings
+        return _fit_press_files(paths, output, method, mapping, terms, given, tare, plot, max_steps)
+    sensor, field, num_rays, progress = method.sensor, method.field, method.num_rays, method.progress
     logs = read_logs([Path(p) for p in paths], mapping, sensor)
     for log, path in zip(logs, paths):  # every log checked before the first is simulated
         check_pose_columns(log, str(path))
@@ -169,9 +188,10 @@ def fit_logs(
     return report
 
 
-def _fit_press_files(paths, output, sensor, indentation, mapping, terms, solver, tare, plot, options) -> dict:
-    from ._press_fit import MAX_TERMS, fit_press_logs
-    from ._press_report import write_press_fit_outputs
+def _fit_press_files(paths, output, method, mapping, terms, solver, tare, plot, max_steps) -> dict:
+    from .lumped import MAX_TERMS, fit_press_logs, write_press_fit_outputs
+
+    sensor, options = method.sensor, dict(method.press_options(), **({"max_steps": max_steps} if max_steps is not None else {}))
 
     if tare:
         raise HydrotactError("--tare: a lumped fit fits each channel's drifting baseline itself (--drift); leave --tare out")
@@ -186,5 +206,5 @@ def _fit_press_files(paths, output, sensor, indentation, mapping, terms, solver,
             f"{paths[other]}: from sensor {logs[other].metadata.get('sensor')!r}, but {paths[0]} is from {first!r}: a lumped fit is one sensor's "
             "channel law (fit each sensor on its own)"
         )
-    fit = fit_press_logs(logs, [str(p) for p in paths], terms=terms, indentation=indentation, solver=solver, **options)
+    fit = fit_press_logs(logs, [str(p) for p in paths], terms=terms, solver=solver, **options)
     return write_press_fit_outputs(fit, output, paths=[str(p) for p in paths], plot=plot)

@@ -112,7 +112,7 @@ class FitProblem(eqx.Module):
         return FitProblem(logs=self.logs, gain_names=self.gain_names, infos=())
 
 
-def _file_digest(path) -> str | None:
+def file_digest(path) -> str | None:
     import hashlib
 
     path = Path(path)
@@ -245,7 +245,7 @@ def make_fit_problem(
         infos.append(
             LogInfo(
                 source=source, channels=channels, force_columns=force_columns, sensor=log.metadata.get("sensor"),
-                pressure=log.metadata.get("pressure", "absolute"), sha256=_file_digest(source), noise=tuple(float(v) for v in noise),
+                pressure=log.metadata.get("pressure", "absolute"), sha256=file_digest(source), noise=tuple(float(v) for v in noise),
             )
         )
     return FitProblem(logs=tuple(prepared), gain_names=tuple(gain_names), infos=tuple(infos))

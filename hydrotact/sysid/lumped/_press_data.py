@@ -13,8 +13,8 @@ import warnings
 
 import numpy as np
 
-from .._errors import HydrotactError, warn
-from ..data import estimate_noise, sensor_spec
+from ..._errors import HydrotactError, warn
+from ...data import estimate_noise, sensor_spec
 from ._lumped import ONSET_HALF_RANGE
 from ._press_windows import PressData, make_press_data
 from ._presses import GAP_FACTOR, POSITION_COLUMNS, PRESS_THRESHOLD, SITE_TOLERANCE, find_log_presses

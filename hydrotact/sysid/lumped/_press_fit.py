@@ -1,11 +1,11 @@
 """Fitting the lumped press model to stage logs (host driver around the pure core of
-:mod:`hydrotact.sysid._lumped`).
+:mod:`hydrotact.sysid.lumped._lumped`).
 
 :func:`fit_press_logs` takes logs of one sensor pressed by a stage (the travel in an
 indentation column, the site in position columns) and fits, jointly over the logs:
 
 - shared: the relaxation shape (Eᵢ/E∞, τᵢ) and each channel's elastic law at each
-  site (amplitudes of powers of the depth, see :mod:`hydrotact.sysid._lumped`; fixed
+  site (amplitudes of powers of the depth, see :mod:`hydrotact.sysid.lumped._lumped`; fixed
   at 0 where the channel moves less than SITE_RESPONSE_SNR noise stds in every press
   at the site) — sites are stage positions, matched across logs;
 - per log: each press's contact onset (within ±0.5 mm of its first estimate), the
@@ -33,14 +33,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import HydrotactError, warn
-from ._fit import CHI_SQUARE_WARNING, identify_time
+from ..._errors import HydrotactError, warn
+from ..shared import CHI_SQUARE_WARNING, LevenbergMarquardt, identify_time, make_solver, solver_name
 from ._lumped import LAG_BOUND, ONSET_HALF_RANGE
 from ._press_data import DRIFT_KNOT_S, prepare_press_logs
 from ._press_solve import SHAPE_STARTS, fit_terms, press_outputs, solve_press_scanned
 from ._press_windows import POWERS
 from ._presses import POSITION_COLUMNS, PRESS_THRESHOLD
-from ._solve import LevenbergMarquardt, make_solver, solver_name
 
 # Levenberg-Marquardt's xtol for the press model (the solver's default is 1e-6):
 # its χ² has kinks (a channel's elastic part switches on where it crosses 0), and
@@ -128,6 +127,31 @@ class PressFit:
     def predictions(self) -> list:
         """(T, C) the model's readings per log, Pa (observed − residual × noise)."""
         return [log.observed - residual * log.noise[None, :] for log, residual in zip(self.logs, self.residuals)]
+
+
+@dataclasses.dataclass(frozen=True)
+class LumpedFit:
+    """The lumped press model as :func:`hydrotact.sysid.fit_logs`'s `method`
+    (settings only; the command line's `fit --lumped`): the logs' `sensor` where
+    their metadata names none; the travel column `indentation`, the stage's
+    `position_columns`, `drift`, `drift_from`, `lag`, `estimate_lag`,
+    `saturation_pa`, the press `threshold` and the shape `starts`, as for
+    :func:`fit_press_logs`."""
+
+    sensor: str | None = None
+    indentation: str = "indentation"
+    position_columns: tuple[str, ...] = POSITION_COLUMNS
+    drift: float | str = DRIFT_KNOT_S
+    drift_from: str = "all"
+    lag: float = 0.0
+    estimate_lag: bool = False
+    saturation_pa: float | None = None
+    threshold: float = PRESS_THRESHOLD
+    starts: int | str = "auto"
+
+    def press_options(self) -> dict:
+        """fit_press_logs's keyword arguments from these settings."""
+        return {field.name: getattr(self, field.name) for field in dataclasses.fields(self) if field.name != "sensor"}
 
 
 def parse_starts(text) -> int | str:

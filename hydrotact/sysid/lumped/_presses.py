@@ -23,7 +23,7 @@ import dataclasses
 
 import numpy as np
 
-from .._errors import HydrotactError
+from ..._errors import HydrotactError
 
 PRESS_THRESHOLD = 0.05  # of the travel's range above its rest level
 SITE_TOLERANCE = 1e-6  # m: stage positions closer than this are one site

@@ -47,7 +47,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..visco import Prony
+from ...visco import Prony
 from ._press_directions import lag_direction, make_log_terms, onset_directions, shape_directions
 from ._press_projection import (
     ACTIVE_PASSES,

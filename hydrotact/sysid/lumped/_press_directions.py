@@ -9,8 +9,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from .._types import Array
-from ..visco import Prony
+from ..._types import Array
+from ...visco import Prony
 from ._press_windows import PressData, PressWindows, press_site_matrix
 
 

@@ -50,15 +50,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import HydrotactError, warn
-from ..data import estimate_noise, read_material
+from ..._errors import HydrotactError, warn
+from ...data import estimate_noise, read_material
+from ..shared import file_digest
 from ._lumped import ONSET_HALF_RANGE
 from ._prediction import _estimate_home, _make_law_model, _parameter_variance, _predict, _tare_variance
 from ._press_data import DRIFT_KNOT_S, drift_basis, find_clipped, find_kinks, upper_limit
 from ._press_projection import solve_baselines
 from ._press_windows import POWERS, make_press_data
 from ._presses import SITE_TOLERANCE, find_log_presses
-from ._problem import _file_digest
 
 HOLD_TOLERANCE = 1e-6  # m: a press holds where its travel is within this of its deepest
 HOMES = ("estimate", "fit")
@@ -214,7 +214,7 @@ def _compare_log(document, report, log, source, *, tare, home, covariance, drift
     if law["indentation"] not in log.columns:
         raise HydrotactError(f"{source}: no travel column {law['indentation']!r} (the fit's indentation column)")
     presses = find_log_presses(log, law["indentation"], law["position_columns"], source=source)
-    own = _own_log(report, _file_digest(source))
+    own = _own_log(report, file_digest(source))
     sites = law["sites"]
     # Presses that began in a gap are in the model (their memory lifts the next
     # presses' readings) but not compared (their loading is unseen).
@@ -319,9 +319,9 @@ def compare_fit(fit_dir, paths, output, *, mapping=None, tare="no-load", home="e
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from .. import __version__
-    from .._files import atomic_path, check_output, write_text_atomic
-    from ._fit_logs import read_logs
+    from ... import __version__
+    from ..._files import atomic_path, check_output, write_text_atomic
+    from ..shared import read_logs
 
     output = check_output(output, directory=True, what="the comparison")
     tare = parse_tare(tare)

@@ -8,13 +8,12 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .. import __version__
-from .._files import atomic_path
-from ..data import make_material_document
+from ... import __version__
+from ..._files import atomic_path
+from ...data import make_material_document
+from ..shared import file_digest, write_outputs
 from ._press_fit import PressFit
 from ._press_windows import DEPTH_SCALE, POWERS, calc_depths
-from ._problem import _file_digest
-from ._report import write_outputs
 
 COVARIANCE_FILE = "channel_law_covariance.npz"  # beside material.json
 
@@ -26,7 +25,7 @@ def make_press_material(fit: PressFit, paths=(), name: str | None = None) -> dic
         "method": "fit",
         "mode": "lumped",
         "solver": fit.solver,
-        "logs": [{"path": str(path), **({"sha256": _file_digest(path)} if _file_digest(path) else {})} for path in paths],
+        "logs": [{"path": str(path), **({"sha256": file_digest(path)} if file_digest(path) else {})} for path in paths],
         "num_samples": int(sum(int(log.mask.any(axis=1).sum()) for log in fit.logs)),
         "cost": 0.5 * fit.chi_square,
     }
@@ -125,7 +124,7 @@ def make_press_report(fit: PressFit) -> dict:
         "logs": [
             {
                 "source": log.source,
-                **({"sha256": _file_digest(log.source)} if _file_digest(log.source) else {}),
+                **({"sha256": file_digest(log.source)} if file_digest(log.source) else {}),
                 "lag_s": lag.to_json(),
                 "presses": [
                     {"site": int(site), "onset_m": float(onset), "onset_std_m": float(std)}
@@ -143,7 +142,7 @@ def make_press_report(fit: PressFit) -> dict:
 
 def write_press_fit_outputs(fit: PressFit, out_dir, paths=(), plot=None) -> dict:
     """material.json, report.json, the channel law's covariance (COVARIANCE_FILE,
-    numpy's npz: `qq`, `qa`, `aa` of :func:`hydrotact.sysid._press_fit._law_covariance`,
+    numpy's npz: `qq`, `qa`, `aa` of :func:`hydrotact.sysid.lumped._press_fit._law_covariance`,
     which `compare` turns into a prediction band) and, with `plot(fit, out_dir) ->
     {name: path}`, the plots in out_dir (each written atomically). Returns the
     report, with `files`."""

@@ -9,11 +9,11 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._types import Array, Bool, Float, Int
-from ..visco import Prony, calc_kernel_responses_and_derivatives
+from ..._types import Array, Bool, Float, Int
+from ...visco import Prony, calc_kernel_responses_and_derivatives
 
 DEPTH_SCALE = 1e-3  # m: δ is measured in millimetres in the law (amplitudes in Pa at 1 mm)
-POWERS = (1.5, 2.0, 2.5, 3.0)  # the law's powers of the depth (from Hertz's 1.5 up: see hydrotact.sysid._lumped)
+POWERS = (1.5, 2.0, 2.5, 3.0)  # the law's powers of the depth (from Hertz's 1.5 up: see hydrotact.sysid.lumped._lumped)
 # How a law goes on past the deepest depth it was fitted to: the power of the depth a
 # sphere's contact force grows with in the hydroelastic model (Hertz's is 1.5). Past
 # a held-out press's reach, 1.5 and 2 predicted the test stand-in's 0.6 mm presses

@@ -8,11 +8,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..visco import Prony
+from ...visco import Prony
+from ..shared import make_solver, solve_least_squares
 from ._lumped import ONSET_HALF_RANGE
 from ._press_projection import calc_elastic, solve_baselines
 from ._press_windows import PressData, calc_bases, calc_depths
-from ._solve import make_solver, solve_least_squares
 
 UNLIMITED_REACH_M = 1.0  # a law's reach where the fit recorded none: no stage press goes a metre deep
 HOME_GRID = 41  # shifts over ±ONSET_HALF_RANGE tried before the home shift is polished

@@ -8,7 +8,7 @@ Jacobian, which reuses the factors solved here.
 import jax
 import jax.numpy as jnp
 
-from .._linalg import lu_factor, lu_solve, solve
+from ..._linalg import lu_factor, lu_solve, solve
 
 ACTIVE_PASSES = 2  # solves that find where the elastic part is on, before the last
 RIDGE = 1e-12  # relative to the normal matrix' diagonal: keeps an unused site's amplitude at 0

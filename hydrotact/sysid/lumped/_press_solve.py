@@ -1,7 +1,7 @@
 """The lumped press model's solve (host around the pure core of
-:mod:`hydrotact.sysid._lumped`): the shape's starts, the jitted solve from one start,
+:mod:`hydrotact.sysid.lumped._lumped`): the shape's starts, the jitted solve from one start,
 the site-onset rescans after it, the model's own residuals at a solution, and the fit
-of a number of terms from the starts in turn. :mod:`hydrotact.sysid._press_fit` drives
+of a number of terms from the starts in turn. :mod:`hydrotact.sysid.lumped._press_fit` drives
 it over the term counts and reports the result."""
 
 import math
@@ -11,11 +11,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._stall import doing
+from ..._stall import doing
+from ..shared import solve_least_squares
 from ._lumped import LAG_BOUND, PressLayout, calc_press_jacobian, calc_projection, press_residual_fn, projection_at, scan_site_onsets
 from ._press_data import PressLog, site_responses
 from ._press_projection import calc_elastic, solve_baselines, solve_linear
-from ._solve import solve_least_squares
 
 
 def _press_durations(log: PressLog) -> np.ndarray:
