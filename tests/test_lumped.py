@@ -11,19 +11,8 @@ import numpy as np
 import pytest
 
 from hydrotact.sysid._solve import solve_least_squares
-from hydrotact.sysid.lumped._lumped import (
-    LAG_BOUND,
-    ONSET_HALF_RANGE,
-    ONSET_SCAN,
-    PressLayout,
-    _site_scan,
-    calc_press_jacobian,
-    calc_press_predictions,
-    calc_press_residuals,
-    press_residual_fn,
-    projection_at,
-    scan_constants,
-)
+from hydrotact.sysid.lumped._lumped import LAG_BOUND, ONSET_HALF_RANGE, PressLayout, calc_press_jacobian, calc_press_predictions, calc_press_residuals, press_residual_fn
+from hydrotact.sysid.lumped._onset_scan import ONSET_SCAN, _site_scan, projection_at, scan_constants
 from hydrotact.sysid.lumped._press_data import drift_basis
 from hydrotact.sysid.lumped._press_solve import solve_press_scanned
 from hydrotact.sysid.lumped._press_windows import CONTINUATION_POWER, DEPTH_SCALE, POWERS, _law_inputs, calc_bases, calc_depths, calc_site_bases, make_press_data, window_decay

@@ -13,7 +13,8 @@ import numpy as np
 
 from ..._stall import doing
 from ..shared import solve_least_squares
-from ._lumped import LAG_BOUND, PressLayout, calc_press_jacobian, calc_projection, press_residual_fn, projection_at, scan_site_onsets
+from ._lumped import LAG_BOUND, PressLayout, calc_press_jacobian, calc_projection, press_residual_fn
+from ._onset_scan import projection_at, scan_site_onsets
 from ._press_data import PressLog, site_responses
 from ._press_projection import calc_elastic, solve_baselines, solve_linear
 
