@@ -18,3 +18,8 @@ class Choice(StrEnum):
         except ValueError:
             choices = ", ".join(member.value for member in cls)
             raise HydrotactError(f"unknown {what} {value!r}; use one of {choices}") from None
+
+
+BOARD_FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
+"""The sides of a mould's cavity, one of which lies on the sensor's board (`hydrotact
+mesh --mould --board`): `ymax` is the cavity's side towards the mould's +y."""

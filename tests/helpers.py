@@ -120,3 +120,22 @@ def batched_lapack_calls(closed_jaxpr) -> list[str]:
 
     walk(closed_jaxpr.jaxpr)
     return found
+
+
+def write_mould(path, outer, hollows=(), formers=()):
+    """An STL mould part in mm: the box `outer` ((lo, hi) corners) less the boxes
+    `hollows`, plus the boxes `formers` (features that stand into a cavity). Built with
+    manifold3d, so the file is a closed solid; returns the path."""
+    import manifold3d
+
+    def box(lo, hi):
+        return manifold3d.Manifold.cube(tuple(float(h - lo_) for lo_, h in zip(lo, hi))).translate(tuple(map(float, lo)))
+
+    solid = box(*outer)
+    for hollow in hollows:
+        solid = solid - box(*hollow)
+    for former in formers:
+        solid = solid + box(*former)
+    mesh = solid.to_mesh()
+    trimesh.Trimesh(np.asarray(mesh.vert_properties[:, :3]), np.asarray(mesh.tri_verts), process=False).export(str(path))
+    return path

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 import trimesh
-from helpers import assert_one_line_error, box_surface, icosphere, run_cli
+from helpers import assert_one_line_error, box_surface, icosphere, run_cli, write_mould
 
 from hydrotact import HydrotactError
 from hydrotact.field import make_laplace_problem
@@ -310,6 +310,8 @@ def inputs(tmp_path_factory):
     two = trimesh.util.concatenate([icosphere(3e-3), icosphere(3e-3, center=(2.1e-3, 0.3e-3, 0.2e-3))])
     two.export(d / "two_shells.stl")
     (d / "garbage.stl").write_bytes(bytes(range(256)) * 4)
+    write_mould(d / "tray.stl", ((0, 0, 0), (10, 8, 6)), [((2, 2, 2), (8, 6, 6.5))])  # mm
+    write_mould(d / "two_trays.stl", ((0, 0, 0), (20, 8, 6)), [((2, 2, 2), (8, 6, 6.5)), ((12, 2, 2), (18, 6, 6.5))])
     (d / "surface.xyz").write_text("0 0 0\n")
     flat_tet = UNIT_TET.copy()
     flat_tet[3] = [0.3e-3, 0.3e-3, 0.0]
@@ -349,7 +351,7 @@ CASES = [
     ("unknown-command", "bogus", REFUSED, ["invalid choice: 'bogus'"]),
     ("unknown-option", "mesh pad5x5 --colour red", REFUSED, ["unrecognized arguments: --colour red"]),
     # mesh
-    ("mesh-no-source", "mesh", REFUSED, ["mesh:", "SENSOR_OR_SURFACE_FILE"]),
+    ("mesh-no-source", "mesh", REFUSED, ["give a sensor or surface file to mesh, or --mould FILE"]),
     ("mesh-unknown-sensor", "mesh sphere9", REFUSED, ["sphere9", "neither a built-in sensor"]),
     ("mesh-missing-file", "mesh {d}/nowhere.stl", REFUSED, ["nowhere.stl", "no such file"]),
     ("mesh-unknown-suffix", "mesh {d}/surface.xyz", REFUSED, ["surface.xyz", "unknown file type '.xyz'"]),
@@ -375,6 +377,16 @@ CASES = [
     ("surface-zero-area", "mesh {d}/zero_area.obj", REFUSED, ["zero_area.obj", "zero area"]),
     ("surface-in-mm", "mesh {d}/pad_in_mm.stl", REFUSED, ["pad_in_mm.stl", "in mm? (--units mm)"]),
     ("surface-garbage", "mesh {d}/garbage.stl", REFUSED, ["garbage.stl"]),
+    ("mould-open", "mesh --mould {d}/open.stl", REFUSED, ["open.stl", "the mould is not closed", "edges do not belong to exactly two triangles"]),
+    ("mould-convex", "mesh --mould {d}/pad_in_mm.stl --units mm", REFUSED, ["pad_in_mm.stl", "has no cavity (it is convex)"]),
+    ("mould-two-cavities", "mesh --mould {d}/two_trays.stl --units mm", REFUSED, ["two_trays.stl", "the cavity is not one piece", "(96, 96 mm³)"]),
+    ("mould-in-mm-read-as-m", "mesh --mould {d}/tray.stl", REFUSED, ["tray.stl", "in mm? (--units mm)"]),
+    ("mould-missing", "mesh --mould {d}/nowhere_mould.stl --units mm", REFUSED, ["nowhere_mould.stl", "no such file"]),
+    ("mould-garbage", "mesh --mould {d}/garbage.stl --units mm", REFUSED, ["garbage.stl"]),
+    ("mould-and-sensor", "mesh pad5x5 --mould {d}/tray.stl", REFUSED, ["not both"]),
+    ("mould-board-unknown", "mesh --mould {d}/tray.stl --units mm --board up", REFUSED, ["--board", "invalid choice: 'up'"]),
+    ("mould-board-without-mould", "mesh pad5x5 --board ymax", REFUSED, ["--board", "applies to --mould"]),
+    ("mould-second-part-missing", "mesh --mould {d}/tray.stl --mould {d}/nowhere_lid.stl --units mm", REFUSED, ["nowhere_lid.stl", "no such file"]),
     ("tet-degenerate", "field {d}/flat.vtu", REFUSED, ["flat.vtu", "tet 0 is degenerate"]),
     ("tet-inverted", "field {d}/inverted.vtk", REFUSED, ["inverted.vtk", "tet 0 is inverted"]),
     ("tet-mesh-edge-length", "field {d}/box.vtu --edge-length 1e-3", REFUSED, ["box.vtu", "--edge-length applies to sensors and surfaces"]),
@@ -555,6 +567,7 @@ CASES = [
     # inputs that look odd but are right
     ("traj-in-mm-with-units", SIM + " --trajectory {d}/traj_mm.csv --units mm -o log.parquet --json", CLEAR, []),
     ("mesh-edge-in-mm", "mesh pad5x5 --edge-length 1 --units mm --json", CLEAR, []),
+    ("mould-tray", "mesh --mould {d}/tray.stl --units mm --board zmin --edge-length 1 --json", CLEAR, []),
     ("contact-on-a-mesh-file", "contact --mesh {d}/box.vtu --probe plane --at 0,0,0.1mm --modulus 2e5 --json", CLEAR, []),
     ("traj-bom-crlf", SIM + " --trajectory {d}/traj_crlf_bom.csv -o log.parquet --json", CLEAR, []),
     ("fit-short-log-4-terms", "fit {d}/baro.parquet -o fit --terms 4 --max-steps 60", WARNED, ["not identified by these logs", "τ"]),

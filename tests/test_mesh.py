@@ -168,3 +168,78 @@ def test_legacy_vtk_is_ascii_and_exact(tmp_path):
 
 def test_quality_json_serialisable():
     json.dumps(calc_mesh_quality(make_seed_mesh("pad5x5", 1e-3)))
+
+
+# A tray (mm): the box [0,10]x[0,8]x[0,6] less the cavity [2,8]x[2,6]x[2,6], open at the
+# top, with a 1 mm³ pocket former standing on its floor and a groove round the outside
+# (a second, smaller hollow of the hull less the mould, which is not the cavity).
+TRAY = dict(outer=((0, 0, 0), (10, 8, 6)), hollows=[((2, 2, 2), (8, 6, 6.5)), ((0, 0, 0), (1, 8, 1))], formers=[((4, 3, 2), (5, 4, 3))])
+
+
+@pytest.mark.parametrize(("board", "extents", "former"), [("zmin", (6, 4, 4), (4.5, 3.5, 2.5)), ("zmax", (6, 4, 4), (4.5, 3.5, 2.5)), ("ymax", (6, 4, 4), (4.5, 3.5, 2.5))])
+def test_the_cast_of_a_tray_is_its_cavity_with_the_board_side_down(tmp_path, board, extents, former):
+    from helpers import write_mould
+
+    from hydrotact.mesh import make_mould_cavity
+
+    surface, transform = make_mould_cavity(write_mould(tmp_path / "tray.stl", **TRAY), units="mm", board=board)
+    assert surface.is_watertight and surface.is_winding_consistent
+    np.testing.assert_allclose(surface.volume, (6 * 4 * 4 - 1) * 1e-9, rtol=1e-9)  # the cavity less the former
+    lo, hi = surface.bounds
+    size = hi - lo
+    np.testing.assert_allclose(sorted(size), sorted(np.array(extents) * 1e-3), atol=1e-12)
+    np.testing.assert_allclose([lo[2], lo[0] + hi[0], lo[1] + hi[1]], 0.0, atol=1e-12)  # on z = 0, centred in x and y
+    # The transform takes the mould's coordinates (mm) to the cast's (m): the board side
+    # down; the former's centre (in the mould) lies within the cast's box.
+    centre = transform @ np.array([*former, 1.0])
+    down = np.zeros(3)
+    down["xyz".index(board[0])] = 1.0 if board.endswith("max") else -1.0
+    np.testing.assert_allclose(transform[:3, :3] @ down, [0.0, 0.0, -1e-3], atol=1e-15)
+    np.testing.assert_allclose(np.linalg.det(transform[:3, :3]), 1e-9, rtol=1e-12)
+    assert np.all(centre[:3] > lo) and np.all(centre[:3] < hi)
+    if board == "zmin":  # the floor, where the former stands, is the board side
+        np.testing.assert_allclose(centre[2], 0.5e-3, atol=1e-12)
+
+
+def test_a_closed_mould_of_two_parts_casts_its_enclosed_void(tmp_path):
+    from helpers import write_mould
+
+    from hydrotact.mesh import load_tet_mesh, make_mould_cavity
+
+    cavity = ((2, 3, 2), (8, 7, 6))
+    bottom = write_mould(tmp_path / "bottom.stl", ((0, 0, 0), (10, 10, 4)), [cavity])
+    top = write_mould(tmp_path / "top.stl", ((0, 0, 4), (10, 10, 8)), [cavity])
+    surface, _ = make_mould_cavity([bottom, top], units="mm", board="xmax")
+    np.testing.assert_allclose(surface.volume, 96e-9, rtol=1e-9)
+    np.testing.assert_allclose(surface.bounds, [[-2e-3, -2e-3, 0.0], [2e-3, 2e-3, 6e-3]], atol=1e-12)  # mould x (6 mm) stands up
+    # Each part alone is an open tray whose cast is half the void.
+    np.testing.assert_allclose(make_mould_cavity(bottom, units="mm")[0].volume, 48e-9, rtol=1e-9)
+    # Meshed: the board side bonded (core), every other face free, the volume kept.
+    mesh = load_tet_mesh([str(bottom), str(top)], units="mm", board="xmax", edge_length=1.0)
+    np.testing.assert_allclose(float(np.sum(calc_signed_volumes(mesh.vertices, mesh.tets))), 96e-9, rtol=2e-3)
+    tags = np.asarray(mesh.face_tags)
+    core = np.asarray(mesh.vertices)[np.asarray(mesh.boundary_faces)[tags == CORE]]
+    np.testing.assert_allclose(core[..., 2], 0.0, atol=1e-9)
+    np.testing.assert_allclose(np.sum(0.5 * np.linalg.norm(np.cross(core[:, 1] - core[:, 0], core[:, 2] - core[:, 0]), axis=1)), 16e-6, rtol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("parts", "fragments"),
+    [
+        ([dict(outer=((0, 0, 0), (10, 8, 6)))], ["box.stl", "has no cavity"]),
+        ([dict(outer=((0, 0, 0), (20, 8, 6)), hollows=[((2, 2, 2), (8, 6, 6.5)), ((12, 2, 2), (18, 6, 6.5))])], ["box.stl", "not one piece", "two largest hollows (96, 96 mm³)"]),
+        ([dict(outer=((0, 0, 0), (20, 8, 6)), hollows=[((2, 2, 2), (8, 6, 4)), ((12, 2, 2), (18, 6, 4))])], ["box.stl", "not one piece", "2 enclosed cavities"]),
+    ],
+    ids=["convex", "two-open-cavities", "two-enclosed-cavities"],
+)
+def test_a_mould_without_one_cavity_is_refused(tmp_path, parts, fragments):
+    from helpers import write_mould
+
+    from hydrotact import HydrotactError
+    from hydrotact.mesh import make_mould_cavity
+
+    paths = [write_mould(tmp_path / "box.stl", **part) for part in parts]
+    with pytest.raises(HydrotactError) as error:
+        make_mould_cavity(paths, units="mm")
+    for fragment in fragments:
+        assert fragment in str(error.value), (fragment, str(error.value))

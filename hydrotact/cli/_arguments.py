@@ -28,9 +28,9 @@ def number_pair(text: str) -> tuple[float, float]:
         raise argparse.ArgumentTypeError(f"expected LOW,HIGH (two numbers), got {text!r}") from None
 
 
-def add_source_arguments(parser: argparse.ArgumentParser, what: str) -> None:
+def add_source_arguments(parser: argparse.ArgumentParser, what: str, optional: bool = False) -> None:
     """The sensor-or-file argument and its meshing flags (mesh, field)."""
-    parser.add_argument("source", metavar=what, help="a built-in sensor (pad5x5, sphere8, ellipsoid8) or a file")
+    parser.add_argument("source", metavar=what, nargs="?" if optional else None, help="a built-in sensor (pad5x5, sphere8, ellipsoid8) or a file")
     parser.add_argument("--edge-length", type=number, metavar="L", help="target tet edge length in --units (sensors, surfaces; default: the sensor's own, a surface's size / 20)")
     parser.add_argument("--units", default="m", choices=list(LENGTH_UNITS), help="length unit of a surface file's coordinates, --edge-length and --core-plane (default m)")
     parser.add_argument("--core-plane", type=number, metavar="Z", help="the core (bonded) faces lie on the plane z = Z, in --units (default: the lowest z)")

@@ -2,6 +2,7 @@
 
 from ._io import MESH_SUFFIXES as MESH_SUFFIXES, read_mesh as read_mesh, to_pyvista as to_pyvista, write_mesh as write_mesh
 from ._load import load_tet_mesh as load_tet_mesh
+from ._mould import BOARD_FACES as BOARD_FACES, make_mould_cavity as make_mould_cavity
 from ._primitives import (
     make_ball as make_ball,
     make_box as make_box,

@@ -32,12 +32,17 @@ def load_surface(path, units: str = "m") -> trimesh.Trimesh:
     check_vertices(surface.vertices, str(path))  # before processing, which would drop a NaN vertex and report holes
     surface.process()
     surface.apply_scale(LENGTH_UNITS[units])
+    check_surface_size(surface, str(path), units)
+    return surface
+
+
+def check_surface_size(surface: trimesh.Trimesh, source: str, units: str) -> None:
+    """Refuse an elastomer (in metres) whose size says its file's units were misread."""
     size = float(np.linalg.norm(np.ptp(surface.vertices, axis=0)))
     low, high = SURFACE_SIZE_M
     if not low <= size <= high:
         hint = "in mm? (--units mm)" if size > high else "is --units right? (the file's numbers are read in --units)"
-        raise HydrotactError(f"{path}: a surface {size:.3g} m across (in --units {units}) is no tactile sensor's elastomer ({low * 1e3:g} mm to {high:g} m): {hint}")
-    return surface
+        raise HydrotactError(f"{source}: a surface {size:.3g} m across (in --units {units}) is no tactile sensor's elastomer ({low * 1e3:g} mm to {high:g} m): {hint}")
 
 
 def find_self_intersections(vertices: np.ndarray, faces: np.ndarray, max_pairs: int = 1) -> np.ndarray:
