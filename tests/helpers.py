@@ -73,12 +73,24 @@ def tet_barycentric(vertices, tets, points):
 
 
 def locate(vertices, tets, points, tolerance=1e-9):
-    """Index of a tet containing each point and the point's barycentric coordinates."""
-    bary = tet_barycentric(vertices, tets, points)
-    inside = np.all(bary >= -tolerance, axis=-1)
-    assert inside.any(axis=1).all(), "a point lies outside the mesh"
-    index = np.argmax(inside, axis=1)
-    return index, bary[np.arange(len(points)), index]
+    """Index of a tet containing each point (the lowest, where several do) and the
+    point's barycentric coordinates. Only the tets whose centroid lies within the
+    largest centroid-to-vertex distance of a point can hold it (scipy's k-d tree)."""
+    from scipy.spatial import cKDTree
+
+    corners = vertices[tets]
+    centroids = corners.mean(axis=1)
+    radius = float(np.linalg.norm(corners - centroids[:, None], axis=-1).max())
+    near = cKDTree(centroids).query_ball_point(points, radius * (1.0 + 1e-9) + tolerance)
+    index = np.empty(len(points), dtype=np.int64)
+    bary = np.empty((len(points), 4))
+    for k, candidates in enumerate(near):
+        candidates = np.sort(np.asarray(candidates, dtype=np.int64))
+        inside = np.all((found := tet_barycentric(vertices, tets[candidates], points[k : k + 1])[0]) >= -tolerance, axis=-1)
+        assert inside.any(), f"point {k} lies outside the mesh"
+        first = int(np.argmax(inside))
+        index[k], bary[k] = candidates[first], found[first]
+    return index, bary
 
 
 @contextlib.contextmanager

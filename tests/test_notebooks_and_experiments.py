@@ -121,23 +121,22 @@ def test_ablation_table1_and_fine_tuning_curve_smoke(tmp_path, monkeypatch):
 def test_layout_design_smoke(tmp_path, monkeypatch):
     run_experiment(monkeypatch, "layout_design", "--smoke", "--sensor", "sphere8-cones", "--output", tmp_path)
     report = json.loads((tmp_path / "layout_design.json").read_text())
-    # The smoke leaves out risers-d (the D-optimal objective under the risers' constraints: both run here).
-    assert set(report["designs"]) == {"risers", "inside"}
-    risers, inside = (report["designs"][name]["scores"] for name in ("risers", "inside"))
-    assert set(risers) == {"designed", "built-in", "regular", "random start"} and set(inside) == {"designed-inside", "random", "built-in", "regular"}
-    assert [report["designs"][name]["config"]["objective"] for name in ("risers", "inside")] == ["k", "d"]
-    assert report["designs"]["risers"]["config"]["balance"] == 4.0
-    # Each design improves its objective over the sensor's own layout (each climb starts there).
-    for scores, designed in ((risers, "designed"), (inside, "designed-inside")):
-        assert scores[designed]["score"] > scores["built-in"]["score"], designed
-        assert all(np.isfinite(score["rms_neighbour_error_m"]) and score["rms_neighbour_error_m"] > 0.0 for score in scores.values())
+    # The smoke runs the risers design only (layout_design.SMOKE_SKIPS: the D-optimal
+    # objective of the other two runs in tests/test_design.py and notebook 05).
+    assert set(report["designs"]) == {"risers"}
+    risers = report["designs"]["risers"]["scores"]
+    assert set(risers) == {"designed", "built-in", "regular", "random start"}
+    assert report["designs"]["risers"]["config"]["objective"] == "k" and report["designs"]["risers"]["config"]["balance"] == 4.0
+    # The design improves its objective over the sensor's own layout (its climb starts there).
+    assert risers["designed"]["score"] > risers["built-in"]["score"]
+    assert all(np.isfinite(score["rms_neighbour_error_m"]) and score["rms_neighbour_error_m"] > 0.0 for score in risers.values())
     # On risers no port stands higher than the built-in's highest.
     from hydrotact.sensors import load_sensor
 
     height = report["designs"]["risers"]["config"]["max_height"]
     assert np.isclose(height, 2e-3) and np.all(load_sensor(tmp_path / "layout_design_sensor.json").taxel_positions_S[:, 2] <= height + 1e-12)
     table = {entry["layout"]: entry for entry in report["table"]}
-    assert set(table) == {"designed", "built-in", "regular", "random", "designed-inside"}
+    assert set(table) == {"designed", "built-in", "regular"}
     for name in table:
         assert all(np.isfinite(table[name][metric]["mean"]) for metric in ("theta_rmse", "phi_rmse", "arc_length_mean", "fn_rmse")), name
     # Every layout's dataset pressed the same events (the probe's path and the force it
