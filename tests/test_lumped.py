@@ -3,6 +3,7 @@ projection recovers the linear parameters at the truth, misplaced onsets or lag
 show, and Levenberg-Marquardt recovers the shape, onsets and lag."""
 
 import dataclasses
+import os
 
 import equinox as eqx
 import jax
@@ -342,3 +343,16 @@ def test_batched_solves_run_one_matrix_at_a_time_and_never_deadlock():
     }
     for name, program in programs.items():
         assert batched_lapack_calls(program) == [], name
+
+
+def test_the_onset_scans_shifts_do_not_depend_on_the_importers_precision():
+    """ONSET_SCAN is made at import: a caller who imports hydrotact before enabling
+    float64 (as a notebook may) gets the same shifts as the command line, to the bit
+    (float32-rounded shifts took the three-log benchmark fit down another path)."""
+    import subprocess
+    import sys
+
+    code = "import hydrotact.sysid.lumped._onset_scan as s; print(repr(s.ONSET_SCAN))"
+    shown = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env={**os.environ, "JAX_ENABLE_X64": "0"}, check=True).stdout
+    with jax.enable_x64(True):
+        assert eval(shown) == tuple(float(v) for v in jnp.linspace(-300e-6, 300e-6, 25))

@@ -23,7 +23,8 @@ from ._press_windows import calc_depths, calc_site_bases, window_decay
 # a reduced χ² of 0.99 that no threshold on the fit's quality sees. A scan of each
 # site's common onset shift, the rest held, finds the true basin (3114.9 at +150 µm
 # before any re-solve).
-ONSET_SCAN = tuple(float(v) for v in jnp.linspace(-300e-6, 300e-6, 25))  # m, the shifts tried (25 µm apart)
+with jax.enable_x64(True):  # the same float64 shifts however the importer has set JAX's precision
+    ONSET_SCAN = tuple(float(v) for v in jnp.linspace(-300e-6, 300e-6, 25))  # m, the shifts tried (25 µm apart)
 
 
 def _shift_site(layout: PressLayout, x, args, site, offset):
