@@ -468,6 +468,11 @@ def test_elastic_barometers_in_the_forward_model(tmp_path, monkeypatch):
     samples = simulate(mixed, make_prony(1e5), probe, trajectory, cache=False)
     pressures = np.asarray(samples.taxel_pressures)
     assert np.all(pressures[0] == 0.0)
+    # Its log names the stress-reading channels (their elastic readings may be tension).
+    from hydrotact.sim import make_barometer_log
+
+    log = make_barometer_log(spec, samples, trajectory, probe="sphere:r=3mm,subdivisions=2", material=make_prony(1e5))
+    assert log.metadata["stress_channels"] == [name for name, kind in zip(spec.taxel_names, kinds) if kind == "elastic"]
     elastic_readings = pressures[2, spec.is_elastic]
     assert np.all(elastic_readings > 0.0)
     assert np.argmax(pressures[2]) == 12  # b22, under the press

@@ -310,3 +310,18 @@ def test_a_viscoelastic_release_may_read_below_zero(material):
 )
 def test_elastic_pressures_of_the_wrong_sign_are_refused(tmp_path, material, values, fragments):
     _assert_refused(tmp_path, _log(_metadata(material=material), b01=values), fragments)
+
+
+def test_a_barometer_reading_the_elastomers_stress_may_read_tension(tmp_path):
+    """A channel named in `stress_channels` (an elastic barometer: its port's stress,
+    which a press bending a pocket's ceiling puts in tension) may read below zero
+    under an elastic material; the log's other channels are still checked, and a
+    stress channel that is not a channel is refused."""
+    elastic = {"modulus_Pa": 1e6}
+    tension = -UNDERSHOOT
+    check_log(_log(_metadata(material=elastic, stress_channels=["b01"]), b01=tension), "log.parquet")
+    _assert_refused(tmp_path, _log(_metadata(material=elastic, stress_channels=["b01"]), b00=tension), ["'b00'", "-8000 Pa is negative"])
+    _assert_refused(tmp_path, _log(_metadata(material=elastic, stress_channels=["b99"])), ["stress_channels", "'b99' is not one of the log's channels"])
+    path = tmp_path / "stress.parquet"
+    write_log(path, _log(_metadata(material=elastic, stress_channels=["b01"]), b01=tension))
+    np.testing.assert_array_equal(read_log(path).columns["b01"], tension)

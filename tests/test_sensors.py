@@ -12,6 +12,7 @@ from helpers import box_surface
 
 from hydrotact import HydrotactError
 from hydrotact._schemas import load_schema, validate
+from hydrotact.mesh import calc_signed_volumes
 from hydrotact.sensors import BUILTIN_SENSORS, Part, SensorSpec, known_parts, load_sensor, with_receptive_fields
 from hydrotact.sensors._builtins import builtin_documents, builtin_text
 from hydrotact.sensors._inside import calc_winding_numbers, find_points_outside_surface, find_points_outside_tets
@@ -255,6 +256,42 @@ def test_surface_geometry(tmp_path):
     # the position check runs on load, against the closed surface
     document["taxels"][1]["position"] = [1.5, 0, 3.5]
     _assert_fails(_write(tmp_path, document, "above.json"), "taxels[1].position", "outside the surface block.stl")
+
+
+def test_mould_geometry(tmp_path):
+    """A sensor cast in a tray whose floor carries two pocket formers (2 x 2 x 1 mm):
+    the cast's board side (the floor) down on z = 0, a barometer at each pocket's
+    ceiling reading the elastomer's stress there."""
+    from helpers import write_mould
+
+    (tmp_path / "cad").mkdir()
+    write_mould(tmp_path / "cad" / "tray.stl", ((0, 0, 0), (16, 8, 6)), [((2, 2, 2), (14, 6, 6.5))], formers=[((4, 3, 2), (6, 5, 3)), ((10, 3, 2), (12, 5, 3))])
+    document = {
+        "name": "cast",
+        "description": "a 12 x 4 x 4 mm strip cast in a tray, two barometers in its pockets",
+        "units": {"length": "mm", "angle": "deg"},
+        "geometry": {"kind": "mould", "paths": ["cad/tray.stl"], "board": "zmin", "edge_length": 1.0},
+        "part": "BMP388",
+        "taxels": [
+            {"name": f"p{k}", "position": [x, 0, 1], "axis": [0, 0, 1], "receptive_field": {"kind": "elastic", "port_radius": 0.5}} for k, x in enumerate((-3, 3))
+        ],
+    }
+    spec = load_sensor(_write(tmp_path, document))
+    assert spec.geometry.kind == "mould" and spec.geometry.surface_units == "mm" and spec.geometry.board == "zmin"
+    assert spec.geometry.paths == (str((tmp_path / "cad" / "tray.stl").resolve()),)
+    assert spec.is_elastic.all()
+    mesh = spec.make_mesh()
+    np.testing.assert_allclose(float(np.sum(calc_signed_volumes(mesh.vertices, mesh.tets))), (12 * 4 * 4 - 2 * 4) * 1e-9, rtol=2e-3)
+    lo, hi = np.asarray(mesh.vertices).min(axis=0), np.asarray(mesh.vertices).max(axis=0)
+    np.testing.assert_allclose([lo, hi], [[-6e-3, -2e-3, 0.0], [6e-3, 2e-3, 4e-3]], atol=2e-5)  # within fTetWild's envelope
+    again = load_sensor(_write(tmp_path, spec.to_json(), "elsewhere.json"))
+    _assert_same(spec, again)
+    assert again.geometry.paths == spec.geometry.paths and again.geometry.board == "zmin"
+    # A port inside a pocket's former (air, not rubber) is outside the cast; a missing part is named.
+    document["taxels"][1]["position"] = [3, 0, 0.5]
+    _assert_fails(_write(tmp_path, document, "in_pocket.json"), "taxels[1].position", "outside the cast of tray.stl")
+    document["geometry"]["paths"] = ["cad/tray.stl", "cad/lid.stl"]
+    _assert_fails(_write(tmp_path, document, "no_lid.json"), "geometry.paths[1]: surface file", "lid.stl does not exist")
 
 
 # --- bad files -------------------------------------------------------------------------

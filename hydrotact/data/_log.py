@@ -82,10 +82,17 @@ def _unit_hint(value: float, low: float, high: float) -> str:
 def _check_pressures(log: BarometerLog, source: str, spec=None) -> None:
     """Readings a barometer can give: absolute ones positive and within the part's
     range (or, for a sensor we do not know, near the atmosphere), elastic ones
-    (simulated elastomer pressure) of the right sign, none beyond 10 MPa."""
+    (simulated elastomer pressure) of the right sign, none beyond 10 MPa. A barometer
+    that reads the elastomer's stress at its port (an `elastic` receptive field: the
+    log's `stress_channels`) reads tension too (a port on a free face that the press
+    bends, as a pocket's ceiling): its sign is not checked."""
     reference = log.metadata["pressure"]
     low, high = (float(v) for v in spec.part.range_pa) if spec is not None else ABSOLUTE_RANGE_PA
     part = f"the {spec.part.name}'s range" if spec is not None else "the range of a barometer in air"
+    stressed = set(log.metadata.get("stress_channels", ()))
+    unknown = sorted(stressed - set(log.metadata["channels"]))
+    if unknown:
+        raise HydrotactError(f"{source}: stress_channels: {unknown[0]!r} is not one of the log's channels")
     for name in log.metadata["channels"]:
         values = np.asarray(log.columns[name], dtype=np.float64)
         label = log.describe_column(name)
@@ -102,7 +109,7 @@ def _check_pressures(log: BarometerLog, source: str, spec=None) -> None:
                 raise HydrotactError(
                     f"{source}: column {label}, row {row + 1}: {values[row]:.6g} Pa is outside {part}, {low:g}-{high:g} Pa{_unit_hint(values[row], low, high)}"
                 )
-        if reference == "elastic":
+        if reference == "elastic" and name not in stressed:
             _check_elastic_sign(log, values, label, source)
 
 

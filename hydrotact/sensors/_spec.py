@@ -20,7 +20,7 @@ from .._defaults import DEFAULT_POISSON_RATIO, DEFAULT_PORT_RADIUS
 from .._errors import HydrotactError
 from .._schemas import format_path, load_schema, parse_json, read_json, validate
 from .._units import LENGTH_UNITS, UNITS
-from ..mesh import SEED_SENSORS, SURFACE_SUFFIXES, TetMesh, load_surface, load_tet_mesh, make_seed_mesh, seed_surface
+from ..mesh import SEED_SENSORS, SURFACE_SUFFIXES, TetMesh, load_surface, load_tet_mesh, make_mould_cavity, make_seed_mesh, seed_surface
 from ._builtins import BUILTIN_SENSORS
 from ._inside import find_points_outside_surface, find_points_outside_tets
 
@@ -68,7 +68,10 @@ class Geometry:
     `kind` "seed": the built-in elastomer `seed` (at `edge_length` metres, or the
     shipped resolution when None). `kind` "surface": the closed surface file `path`
     (absolute; coordinates in `surface_units`) meshed at `edge_length` metres with the
-    faces on z = `core_plane_z` metres bonded.
+    faces on z = `core_plane_z` metres bonded. `kind` "mould": the cavity of the mould
+    whose part files are `paths` (absolute; coordinates in `surface_units`), its
+    `board` side down on z = 0 (`core_plane_z`), bonded there
+    (:func:`hydrotact.mesh.make_mould_cavity`).
     """
 
     kind: str
@@ -77,6 +80,8 @@ class Geometry:
     surface_units: str = "m"
     core_plane_z: float | None = None
     edge_length: float | None = None
+    paths: tuple[str, ...] | None = None
+    board: str = "zmin"
 
     def to_json(self) -> dict:
         if self.kind == "seed":
@@ -84,6 +89,8 @@ class Geometry:
             if self.edge_length is not None:
                 document["edge_length"] = self.edge_length
             return document
+        if self.kind == "mould":
+            return {"kind": "mould", "paths": list(self.paths), "mould_units": self.surface_units, "board": self.board, "edge_length": self.edge_length}
         return {
             "kind": "surface",
             "path": self.path,
@@ -160,10 +167,11 @@ class SensorSpec:
         else:
             scale = LENGTH_UNITS[geometry.surface_units]
             mesh = load_tet_mesh(
-                geometry.path,
+                list(geometry.paths) if geometry.kind == "mould" else geometry.path,
                 edge_length=None if geometry.edge_length is None else geometry.edge_length / scale,  # in the file's units, as core_plane_z
                 units=geometry.surface_units,
                 core_plane_z=geometry.core_plane_z / scale,
+                board=geometry.board,
             )
         if check:
             self.check_against_mesh(mesh)
@@ -285,13 +293,10 @@ def _make_geometry(entry: dict, length: float, length_unit: str, source: str, ba
     edge_length = None if edge_length is None else float(edge_length) * length
     if entry["kind"] == "seed":
         return Geometry(kind="seed", seed=entry["seed"], edge_length=edge_length)
-    path = Path(entry["path"]).expanduser()
-    if not path.is_absolute():
-        path = (base or Path.cwd()) / path
-    if path.suffix.lower() not in SURFACE_SUFFIXES:
-        _fail(source, ["geometry", "path"], f"{path.name} is not a surface file; use one of {', '.join(SURFACE_SUFFIXES)}")
-    if not path.is_file():
-        _fail(source, ["geometry", "path"], f"surface file {path} does not exist")
+    if entry["kind"] == "mould":
+        paths = tuple(str(_surface_path(name, ["geometry", "paths", k], source, base)) for k, name in enumerate(entry["paths"]))
+        return Geometry(kind="mould", paths=paths, surface_units=entry.get("mould_units", length_unit), core_plane_z=0.0, edge_length=edge_length, board=entry.get("board", "zmin"))
+    path = _surface_path(entry["path"], ["geometry", "path"], source, base)
     return Geometry(
         kind="surface",
         path=str(path.resolve()),
@@ -299,6 +304,18 @@ def _make_geometry(entry: dict, length: float, length_unit: str, source: str, ba
         core_plane_z=float(entry["core_plane_z"]) * length,
         edge_length=edge_length,
     )
+
+
+def _surface_path(name: str, field: list, source: str, base: Path | None) -> Path:
+    """A surface file named in a spec: absolute, resolved, a surface's suffix, there."""
+    path = Path(name).expanduser()
+    if not path.is_absolute():
+        path = (base or Path.cwd()) / path
+    if path.suffix.lower() not in SURFACE_SUFFIXES:
+        _fail(source, field, f"{path.name} is not a surface file; use one of {', '.join(SURFACE_SUFFIXES)}")
+    if not path.is_file():
+        _fail(source, field, f"surface file {path} does not exist")
+    return path.resolve()
 
 
 @functools.cache
@@ -412,9 +429,12 @@ def calc_sensor_surface(spec: SensorSpec) -> tuple[np.ndarray, np.ndarray]:
     if geometry.kind == "seed":
         return _seed_surface(geometry.seed)
     try:
-        surface = load_surface(geometry.path, geometry.surface_units)
+        if geometry.kind == "mould":
+            surface = make_mould_cavity(geometry.paths, units=geometry.surface_units, board=geometry.board)[0]
+        else:
+            surface = load_surface(geometry.path, geometry.surface_units)
     except HydrotactError as error:
-        raise HydrotactError(f"{spec.source}: geometry.path: {error}") from None
+        raise HydrotactError(f"{spec.source}: geometry.{'paths' if geometry.kind == 'mould' else 'path'}: {error}") from None
     if not surface.is_watertight:
         _fail(spec.source, ["geometry", "path"], f"{geometry.path} is not a closed surface")
     return np.asarray(surface.vertices), np.asarray(surface.faces)
@@ -433,7 +453,11 @@ def _check_against_surface(spec: SensorSpec) -> None:
     """Every port inside the elastomer's closed surface or on it, and every axis
     pointing into it (cheap: no meshing)."""
     vertices, faces = calc_sensor_surface(spec)
-    what = f"the {spec.geometry.seed} elastomer" if spec.geometry.kind == "seed" else f"the surface {Path(spec.geometry.path).name}"
+    geometry = spec.geometry
+    if geometry.kind == "seed":
+        what = f"the {geometry.seed} elastomer"
+    else:
+        what = f"the cast of {', '.join(Path(p).name for p in geometry.paths)}" if geometry.kind == "mould" else f"the surface {Path(geometry.path).name}"
     diagonal = float(np.linalg.norm(np.ptp(vertices, axis=0)))
     outside = find_points_outside_surface(spec.taxel_positions_S, vertices, faces, _SURFACE_TOLERANCE * diagonal)
     if len(outside):

@@ -142,6 +142,7 @@ def make_barometer_log(
         "source": "simulated",
         "pressure": "elastic" if barometer is None else "absolute",
         "channels": list(spec.taxel_names),
+        **({"stress_channels": [name for name, elastic in zip(spec.taxel_names, spec.is_elastic) if elastic]} if spec.is_elastic.any() else {}),
         "generator": f"hydrotact {__version__}",
         **({"probe": probe} if probe else {}),  # a probe loaded from a mesh has no spec to name it
         "material": material_metadata(material),
