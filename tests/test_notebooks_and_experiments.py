@@ -178,3 +178,46 @@ def test_mtl_calibration_refuses_a_folder_without_its_six_logs(tmp_path, monkeyp
     cases = module["make_cases"]({"single", "group", "leave-one-out"})
     assert [sum(kind == k for _, kind, _, _ in cases) for k in ("single", "group", "leave-one-out")] == [6, 2, 6]
     assert all(left not in fitted and len(fitted) == 2 for _, kind, fitted, left in cases if kind == "leave-one-out")
+
+
+def test_mtl_strip_builds_its_sensor_from_a_mould_and_a_board(tmp_path, monkeypatch):
+    """The real strip's experiment has no smoke run (its data are not in the
+    repository); its sensor stage runs on a stand-in: a tray with three pocket formers
+    and an Eagle board whose packages sit 6 mm apart, shifted. The pockets are found
+    on the cast, the packages matched to them by one translation (a package off its
+    pocket is refused), and the sensor file loads with the barometers at the pockets'
+    ceilings. A folder without the design files is named, and nothing else read."""
+    from helpers import write_mould
+
+    from hydrotact.mesh import make_mould_cavity
+    from hydrotact.sensors import load_sensor
+
+    script = ROOT / "experiments" / "mtl_strip.py"
+    monkeypatch.setattr(sys, "argv", [str(script), "--data", str(tmp_path), "--output", str(tmp_path / "out")])
+    with pytest.raises(SystemExit, match="the mould .* is not there"):
+        runpy.run_path(str(script), run_name="__main__")
+    assert not (tmp_path / "out").exists()
+    strip = runpy.run_path(str(script))
+    (tmp_path / "design").mkdir()
+    formers = [((3.5 + 6 * k, 4.8, 2.5), (6.5 + 6 * k, 6.0, 7.5)) for k in range(3)]  # 3 x 1.2 x 5 mm, on the floor (y = 6)
+    mould = write_mould(tmp_path / "design" / "mould_b_V6.STL", ((0, 0, 0), (22, 7, 10)), [((2, -1, 2), (20, 6, 8))], formers)
+    surface, _ = make_mould_cavity(mould, units="mm", board=strip["BOARD_SIDE"])
+    pockets = strip["find_pockets"](surface)
+    np.testing.assert_allclose(pockets * 1e3, [[-6.0, 0.0, 1.2], [0.0, 0.0, 1.2], [6.0, 0.0, 1.2]], atol=1e-6)
+    parts = {f"P{k + 1}": (31.0 + 6.0 * k, 16.0) for k in range(3)}
+    elements = "".join(f'<element name="{name}" library="baro" package="MPL3115A2" x="{x}" y="{y}"/>' for name, (x, y) in parts.items())
+    board = tmp_path / "design" / "Baro_1D_V1.brd"
+    board.write_text(f'<?xml version="1.0"?><eagle><drawing><board><elements>{elements}<element name="R1" x="0" y="0"/></elements></board></drawing></eagle>')
+    assert strip["read_board_parts"](board) == parts
+    assert strip["find_design"](tmp_path) == (mould, board)
+    shift, ports = strip["align_board"](parts, pockets)
+    np.testing.assert_allclose(shift * 1e3, [-37.0, -16.0], atol=1e-6)
+    np.testing.assert_allclose(ports["P2"] * 1e3, [0.0, 0.0, 1.2], atol=1e-6)
+    with pytest.raises(SystemExit, match="P3 is .* mm from its pocket"):
+        strip["align_board"]({**parts, "P3": (43.5, 16.0)}, pockets)
+    ports["P4"] = ports["P3"]  # the strip logs four channels; the stand-in has three pockets
+    document = strip["make_strip_document"](mould, ports, {"kind": "cone", "half_angle": 40.0}, "stand-in")
+    (tmp_path / "strip.json").write_text(json.dumps(document))
+    spec = load_sensor(tmp_path / "strip.json")
+    assert spec.taxel_names == strip["CHANNELS"] and spec.part.name == "MPL3115A2"
+    np.testing.assert_allclose(spec.taxel_positions_S[1], [0.0, 0.0, 1.2e-3], atol=1e-9)

@@ -339,7 +339,7 @@ BROKEN = {
     "zero half-angle": ("sphere8-cones", _set(["taxels", 0, "receptive_field", "half_angle"], 0), ["taxels[0].receptive_field.half_angle: 0 deg is not in (0, 90)"]),
     "unknown field kind": ("sphere8", _set(["taxels", 1, "receptive_field", "kind"], "ring"), ["taxels[1].receptive_field.kind: must be one of \"disk\", \"cone\", \"elastic\", got \"ring\""]),
     "duplicate names": ("pad5x5", _set(["taxels", 6, "name"], "b00"), ["taxels[6].name: 'b00' is already the name of taxels[0]"]),
-    "unknown part": ("pad5x5", _set(["part"], "BMP999"), ["part: unknown part 'BMP999'; the known parts are BMP388"]),
+    "unknown part": ("pad5x5", _set(["part"], "BMP999"), ["part: unknown part 'BMP999'; the known parts are BMP388, MPL3115A2"]),
     "part of wrong type": ("pad5x5", _set(["part"], 388), ["part: must be a string or an object, got 388"]),
     "zero lsb": ("pad5x5", _set(["part"], {"name": "x", "lsb_pa": 0, "noise_rms_pa": 0.1, "rate_hz": 10, "range_pa": [1, 2], "ambient_pa": 1.5}), ["part.lsb_pa: must be > 0, got 0"]),
     "negative rate": ("pad5x5", _set(["part"], {"name": "x", "lsb_pa": 1, "noise_rms_pa": 0.1, "rate_hz": -10, "range_pa": [1, 2], "ambient_pa": 1.5}), ["part.rate_hz: must be > 0, got -10"]),

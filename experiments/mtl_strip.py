@@ -1,0 +1,315 @@
+"""The MTL strip end to end, from its public design files (issue 47). First stage: the
+sensor from its mould and board, and each barometer's spatial profile, measured and
+simulated.
+
+The data are a public strip sensor's (the MSc project `JiannnH/MTL-BaroTactileSensor`):
+pass `--data DIR`, a checkout of that repository (`Mold/Mold_v6/mould_b_V6.STL`,
+`PCB/BarometerMTL_1D_V1/*.brd`, `Data_collection/tip1/*.csv`) or a folder laid out
+like it with `design/` and `logs/`. Only the six calibration logs named in
+mtl_calibration.CALIBRATION are read; the repository's other logs of the strip are
+kept apart to judge the results and are never opened here. Nothing of the data goes
+into this repository: the committed results are the table and the figure.
+
+1. **The sensor** (`mtl_strip_sensor.json`, in the output's work folder): the
+   elastomer is the mould's cavity (`hydrotact.mesh.make_mould_cavity`, the pocket
+   side on the board: `ymax` in the mould's coordinates), its pockets found on the
+   cast (the flat ceilings facing the board), the board's barometer packages (the
+   Eagle file's elements P1…P16) matched to them in order along the strip by one
+   translation (fitted; the worst package more than 0.2 mm from its pocket is
+   refused), and the four logged channels Sensor_0…3 (P1…P4, the data's README) as
+   barometers at their pockets' ceiling centres reading the elastomer's stress there
+   (`elastic`), beside the same ports with the heuristic cone (`cone`, 40°).
+2. **The spatial profile**: a 10 mm steel ball (R = 5 mm: the authors' later rig; the
+   indenter is not recorded with these logs) pressed `--depth` deep at each x along
+   the strip, each channel's reading against x for both receptive fields (an elastic
+   material of 1 MPa: the shape, not the scale, is compared); and each calibration
+   log's presses, each channel's rise over its pre-press level at the press's
+   deepest sample against the stage's x, shifted by the stage-to-board offset that
+   puts Sensor_2's and Sensor_3's peaks over their barometers (a first estimate, from
+   these files; the full-mode fit will fit it with the rest).
+
+Outputs (in --output, default experiments/results/): `mtl_strip.json` (the sensor's
+alignment, the simulated profiles, the table), `mtl_strip.md` (the table of each
+channel's profile: where it peaks and how wide it is at half its peak, measured (each
+log's rises as a share of its largest, their median at each x) and by each model), `mtl_strip.png`
+(the profiles; the measured rises in kPa). No reading of the logs is written but
+these summaries and the figure. The work folder `mtl_strip.work/` keeps the
+sensor file; a finished profile is read back on a re-run.
+
+Run: `.venv/bin/python experiments/mtl_strip.py --data PATH [--output DIR] [--depth 1.0]`.
+"""
+
+import argparse
+import json
+import re
+import sys
+import xml.etree.ElementTree as ElementTree
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from hydrotact._files import write_text_atomic  # noqa: E402
+
+NAME = "mtl_strip"
+LOGGED = ("P1", "P2", "P3", "P4")  # the logs' Sensor_0..3 (the data's README)
+CHANNELS = ("Sensor_0", "Sensor_1", "Sensor_2", "Sensor_3")
+BOARD_SIDE = "ymax"  # the cast's pocket side, in the mould's coordinates (its tray's floor)
+EDGE_LENGTH_MM = 1.5
+CONE_HALF_ANGLE_DEG = 40.0
+BALL_RADIUS_M = 5e-3
+MATCH_TOLERANCE_MM = 0.2
+
+
+def find_design(data: Path) -> tuple[Path, Path]:
+    """(the mould's STL, the board's Eagle file) under `data`: the repository's layout
+    or a `design/` folder; one line naming what is missing otherwise."""
+    moulds = [data / "Mold" / "Mold_v6" / "mould_b_V6.STL", data / "design" / "mould_b_V6.STL"]
+    boards = sorted((data / "PCB" / "BarometerMTL_1D_V1").glob("*.brd")) + [data / "design" / "Baro_1D_V1.brd"]
+    mould = next((path for path in moulds if path.is_file()), None)
+    board = next((path for path in boards if path.is_file()), None)
+    if mould is None or board is None:
+        missing = "the mould (Mold/Mold_v6/mould_b_V6.STL or design/mould_b_V6.STL)" if mould is None else "the board (PCB/BarometerMTL_1D_V1/*.brd or design/Baro_1D_V1.brd)"
+        sys.exit(f"{data}: {missing} is not there")
+    return mould, board
+
+
+def read_board_parts(path: Path, pattern: str = r"P\d+") -> dict:
+    """{element name: (x, y) mm} of an Eagle board's elements whose names match
+    `pattern` (its XML `<element name= x= y=>`; Eagle's unit is the mm)."""
+    try:
+        root = ElementTree.parse(path).getroot()
+    except (ElementTree.ParseError, OSError) as error:
+        sys.exit(f"{path}: not an Eagle board file ({error})")
+    parts = {}
+    for element in root.iter("element"):
+        name = element.get("name", "")
+        if re.fullmatch(pattern, name):
+            try:
+                parts[name] = (float(element.get("x")), float(element.get("y")))
+            except (TypeError, ValueError):
+                sys.exit(f"{path}: element {name} has no numeric x, y")
+    if not parts:
+        sys.exit(f"{path}: no element named like {pattern!r}")
+    return parts
+
+
+def find_pockets(surface, board_z: float = 0.0) -> np.ndarray:
+    """(k, 3) the centres of a cast's pocket ceilings, m, sorted by x: the connected
+    patches of faces facing the board (normal -z) above it, each its area-weighted
+    centroid."""
+    normals = np.asarray(surface.face_normals)
+    centres = np.asarray(surface.triangles_center)
+    scale = float(np.linalg.norm(np.ptp(surface.vertices, axis=0)))
+    ceiling = np.flatnonzero((normals[:, 2] < -0.99) & (centres[:, 2] > board_z + 1e-6 * scale))
+    if len(ceiling) == 0:
+        return np.zeros((0, 3))
+    faces = np.asarray(surface.faces)[ceiling]
+    parent = np.arange(len(ceiling))
+
+    def root(k):
+        while parent[k] != k:
+            parent[k] = parent[parent[k]]
+            k = parent[k]
+        return k
+
+    owner = {}
+    for k, face in enumerate(faces):
+        for vertex in face:
+            if vertex in owner:
+                parent[root(k)] = root(owner[vertex])
+            else:
+                owner[vertex] = k
+    labels = np.array([root(k) for k in range(len(ceiling))])
+    areas = np.asarray(surface.area_faces)[ceiling]
+    pockets = np.array([np.average(centres[ceiling][labels == label], axis=0, weights=areas[labels == label]) for label in np.unique(labels)])
+    return pockets[np.argsort(pockets[:, 0])]
+
+
+def align_board(parts: dict, pockets: np.ndarray) -> tuple[np.ndarray, dict]:
+    """(the translation board mm -> sensor m, {part: its pocket's centre, m}): the
+    packages sorted by board x matched to the pockets sorted by x, the translation
+    their mean offset; refused where a package lies more than MATCH_TOLERANCE_MM from
+    its pocket after it, or the counts differ."""
+    names = sorted(parts, key=lambda name: parts[name][0])
+    if len(names) != len(pockets):
+        sys.exit(f"the board has {len(names)} barometer packages but the cast {len(pockets)} pockets")
+    board = np.array([parts[name] for name in names]) * 1e-3
+    shift = np.mean(pockets[:, :2] - board, axis=0)
+    misfit = np.linalg.norm(board + shift - pockets[:, :2], axis=1)
+    if misfit.max() > MATCH_TOLERANCE_MM * 1e-3:
+        worst = names[int(np.argmax(misfit))]
+        sys.exit(f"the board's packages do not sit under the cast's pockets: {worst} is {misfit.max() * 1e3:.2f} mm from its pocket after the best shift")
+    return shift, {name: pocket for name, pocket in zip(names, pockets)}
+
+
+def make_strip_document(mould: Path, ports: dict, field: dict, name: str) -> dict:
+    """The strip's sensor document: the mould's cast, a barometer per logged channel
+    at its pocket's ceiling centre (mm), facing into the rubber."""
+    return {
+        "name": name,
+        "description": "The MTL strip (JiannnH/MTL-BaroTactileSensor): the cast of mould_b_V6 (pocket side on the board), MPL3115A2 barometers P1-P4 "
+        "at their pockets' ceiling centres (logged as Sensor_0-3), placed from the Eagle board by the fitted board-to-cast shift.",
+        "units": {"length": "mm", "angle": "deg"},
+        "geometry": {"kind": "mould", "paths": [str(mould.resolve())], "mould_units": "mm", "board": BOARD_SIDE, "edge_length": EDGE_LENGTH_MM},
+        "part": "MPL3115A2",
+        "taxels": [{"name": channel, "position": [float(v) * 1e3 for v in ports[part]], "axis": [0.0, 0.0, 1.0], "receptive_field": field} for channel, part in zip(CHANNELS, LOGGED)],
+    }
+
+
+def simulate_profile(spec, xs: np.ndarray, depth: float) -> np.ndarray:
+    """(len(xs), channels) each barometer's reading, Pa, with the ball `depth` deep
+    into the skin at each x along the strip (y = 0; an elastic material of 1 MPa)."""
+    from hydrotact.contact import make_sphere_probe
+    from hydrotact.sim import make_sensor_model, make_trajectory, simulate
+    from hydrotact.visco import make_prony
+
+    model = make_sensor_model(spec)
+    top = float(np.max(np.asarray(model.field.vertices)[:, 2]))
+    tips = np.column_stack([xs, np.zeros_like(xs), np.full_like(xs, top - depth)])
+    samples = simulate(model, make_prony(1e6), make_sphere_probe(BALL_RADIUS_M), make_trajectory(np.arange(len(xs)) * 0.01, tips), progress=False)
+    return np.asarray(samples.taxel_pressures)
+
+
+def measure_peaks(path: Path) -> list:
+    """Each press of a calibration log: (stage x mm, [each channel's rise over its level
+    before the press, at the press's deepest sample, Pa]). The logs' columns as their
+    README says: `x` in µm, `z` travel in steps."""
+    table = np.genfromtxt(path, delimiter=",", names=True)
+    x, z = table["x"], table["z"]
+    presses = []
+    for site in np.unique(x):
+        rows = np.flatnonzero(x == site)
+        if not np.any(z[rows] > 0):
+            continue
+        deepest = rows[int(np.argmax(z[rows]))]
+        low = z[rows].min() + 0.05 * np.ptp(z[rows])  # the stage retracted (not always to z = 0)
+        before = rows[(z[rows] <= low) & (rows < deepest)][-10:]
+        if len(before) == 0:
+            continue
+        presses.append((float(site) / 1e3, [float(table[c][deepest] - np.mean(table[c][before])) for c in CHANNELS]))
+    return presses
+
+
+def _vertex(xs, values) -> float:
+    """Where a sampled profile peaks: the vertex of the parabola through its highest
+    sample and its two neighbours (the sample itself at an end)."""
+    k = int(np.argmax(values))
+    if k == 0 or k == len(values) - 1:
+        return float(xs[k])
+    a, b, c = values[k - 1], values[k], values[k + 1]
+    curvature = a - 2.0 * b + c
+    return float(xs[k] + (0.5 * (a - c) / curvature if curvature < 0.0 else 0.0) * (xs[k + 1] - xs[k]))
+
+
+def _width(xs, values) -> tuple[float, float]:
+    """(where a profile peaks, its full width at half its peak), mm."""
+    values = np.asarray(values, dtype=float)
+    k = int(np.argmax(values))
+    above = np.flatnonzero(values >= 0.5 * values[k])
+    return float(xs[k]), float(xs[above[-1]] - xs[above[0]]) if len(above) else float("nan")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, required=True, help="a checkout of the strip's repository, or a folder with design/ and logs/ laid out like it")
+    parser.add_argument("--output", type=Path, default=Path(__file__).parent / "results")
+    parser.add_argument("--depth", type=float, default=1.0, help="the simulated ball's depth into the skin, mm")
+    args = parser.parse_args()
+    sys.path.insert(0, str(Path(__file__).parent))
+    from mtl_calibration import find_logs
+
+    from hydrotact.mesh import make_mould_cavity
+    from hydrotact.sensors import load_sensor
+
+    mould, board = find_design(args.data)
+    logs = find_logs(args.data)
+    work = args.output / f"{NAME}.work"
+    work.mkdir(parents=True, exist_ok=True)
+    surface, _ = make_mould_cavity(mould, units="mm", board=BOARD_SIDE)
+    pockets = find_pockets(surface)
+    shift, ports = align_board(read_board_parts(board), pockets)
+    specs = {}
+    for kind, field in (("elastic", {"kind": "elastic", "port_radius": 0.5, "reading": "pressure"}), ("cone", {"kind": "cone", "half_angle": CONE_HALF_ANGLE_DEG})):
+        path = work / f"{NAME}_sensor_{kind}.json"
+        write_text_atomic(path, json.dumps(make_strip_document(mould, ports, field, f"mtl-strip-{kind}"), indent=1) + "\n")
+        specs[kind] = load_sensor(path)
+    xs = np.round(np.arange(-60.0, -11.9, 1.0), 6) * 1e-3
+    profiles = {kind: simulate_profile(spec, xs, args.depth * 1e-3) for kind, spec in specs.items()}
+    measured = {name: measure_peaks(path) for name, path in logs.items()}
+    # Each log's rises as a share of its channel's largest (the logs press 5 or 6 mm,
+    # with and without the vacuum: the shape is compared, their median at each stage
+    # x); the stage-to-cast offset puts the peaks of the channels whose peak lies
+    # inside the presses' span (Sensor_2, Sensor_3: stage x 0-19 mm) over their
+    # barometers, each peak the vertex of the parabola through its three highest
+    # sites.
+    stage, rises = [], []
+    for presses in measured.values():
+        values = np.array([rise for _, rise in presses])
+        stage += [x for x, _ in presses]
+        rises.append(values / np.maximum(values.max(axis=0), 1e-9))
+    stage, rises = np.array(stage), np.concatenate(rises)
+    sites = np.unique(stage)
+    medians = np.array([[np.median(rises[stage == site, c]) for c in range(len(CHANNELS))] for site in sites])
+    offset = float(np.mean([ports[LOGGED[c]][0] * 1e3 - _vertex(sites, medians[:, c]) for c in (2, 3)]))
+    rows = []
+    for c, channel in enumerate(CHANNELS):
+        row = {"channel": channel, "port_x_mm": float(ports[LOGGED[c]][0] * 1e3)}
+        for kind in profiles:
+            row[f"{kind}_peak_x_mm"], row[f"{kind}_width_mm"] = _width(xs * 1e3, profiles[kind][:, c])
+            row[f"{kind}_min_Pa"], row[f"{kind}_max_Pa"] = float(profiles[kind][:, c].min()), float(profiles[kind][:, c].max())
+        row["measured_peak_x_mm"], row["measured_width_mm"] = _width(sites + offset, medians[:, c])
+        row["measured_vertex_x_mm"] = _vertex(sites, medians[:, c]) + offset
+        rows.append(row)
+    document = {
+        "settings": {"depth_mm": args.depth, "ball_radius_mm": BALL_RADIUS_M * 1e3, "edge_length_mm": EDGE_LENGTH_MM, "cone_half_angle_deg": CONE_HALF_ANGLE_DEG},
+        "alignment": {"board_to_cast_shift_mm": (shift * 1e3).tolist(), "pockets_mm": (pockets * 1e3).tolist(), "stage_to_cast_offset_mm": offset},
+        "profile_x_mm": (xs * 1e3).tolist(),
+        "profiles_Pa": {kind: values.tolist() for kind, values in profiles.items()},
+        "table": rows,
+    }
+    args.output.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(args.output / f"{NAME}.json", json.dumps(document, indent=1) + "\n")
+    lines = ["| channel | port x (mm) | measured: peak x (vertex) / width (mm) | elastic: peak x / width (mm), min / max (Pa) | cone: peak x / width (mm), max (Pa) |", "|---|---:|---|---|---|"]
+    for row in rows:
+        lines.append(
+            f"| {row['channel']} | {row['port_x_mm']:.1f} | {row['measured_peak_x_mm']:.1f} ({row['measured_vertex_x_mm']:.1f}) / {row['measured_width_mm']:.1f} | "
+            f"{row['elastic_peak_x_mm']:.1f} / {row['elastic_width_mm']:.1f}, {row['elastic_min_Pa']:.0f} / {row['elastic_max_Pa']:.0f} | "
+            f"{row['cone_peak_x_mm']:.1f} / {row['cone_width_mm']:.1f}, {row['cone_max_Pa']:.0f} |"
+        )
+    write_text_atomic(args.output / f"{NAME}.md", "\n".join(lines) + "\n")
+    _plot(document, measured, args.output / f"{NAME}.png")
+    print(f"wrote {args.output / NAME}.{{json,md,png}}")
+
+
+def _plot(document: dict, measured: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    xs = np.asarray(document["profile_x_mm"])
+    offset = document["alignment"]["stage_to_cast_offset_mm"]
+    figure, axes = plt.subplots(1, 3, figsize=(14, 3.8))
+    for c, channel in enumerate(CHANNELS):
+        colour = f"C{c}"
+        for axis, kind in zip(axes[1:], ("elastic", "cone")):
+            values = np.asarray(document["profiles_Pa"][kind])[:, c]
+            axis.plot(xs, values, color=colour, label=channel)
+        for k, presses in enumerate(measured.values()):
+            axes[0].plot([x + offset for x, _ in presses], [rise[c] / 1e3 for _, rise in presses], ".", color=colour, ms=3, label=None if k else channel)
+    axes[0].set(title="measured: rise at each press's deepest sample", xlabel="x along the strip (mm, stage x + offset)", ylabel="kPa")
+    axes[1].set(title="simulated, elastic (port stress)", xlabel="ball x (mm)", ylabel="Pa (E = 1 MPa)")
+    axes[2].set(title=f"simulated, cone {CONE_HALF_ANGLE_DEG:g}°", xlabel="ball x (mm)", ylabel="Pa (E = 1 MPa)")
+    for axis in axes:
+        axis.legend(fontsize=7)
+        axis.grid(alpha=0.3)
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
+if __name__ == "__main__":
+    main()
