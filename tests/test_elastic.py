@@ -12,7 +12,7 @@ import pytest
 
 from hydrotact import elastic
 from hydrotact.field import calc_tet_gradients
-from hydrotact.mesh import FREE, TetMesh, make_box
+from hydrotact.mesh import CORE, FREE, TetMesh, make_box, make_spherical_shell
 
 # ---------------------------------------------------------------- closed forms
 # Half-space z < 0, surface z = 0, a point force at the origin; depth zeta = -z.
@@ -698,3 +698,79 @@ def test_a_jittered_layout_solves_the_moved_ports_fields(tmp_path, monkeypatch):
     assert len(fields()) == len(solved) + 2  # the same ports: read from the cache
     np.testing.assert_allclose(np.asarray(jittered.elastic.responses), np.asarray(moved.elastic.responses), rtol=0, atol=0)
     assert not np.allclose(np.asarray(jittered.elastic.responses), np.asarray(model.elastic.responses))
+
+
+def test_a_pressurised_spherical_cavity_converges_to_lames_compliance():
+    """A pocket's compliance C (its volume per unit pressure at E = 1 Pa) on a hollow
+    ball fixed on its outer sphere, against Lamé's closed form (u = A r + B / r²):
+    second order in the mesh size, the polyhedral sphere's own order."""
+    a, b, nu = 2e-3, 6e-3, 0.45
+    lam, mu = nu / ((1 + nu) * (1 - 2 * nu)), 1.0 / (2 * (1 + nu))
+    B = 1.0 / ((3 * lam + 2 * mu) / b**3 + 4 * mu / a**3)
+    exact = 4 * np.pi * a**2 * B * (1 / a**2 - a / b**3)
+    errors = []
+    for layers in (2, 3):
+        shell = make_spherical_shell(a, b, layers)  # its inner sphere core, its outer free: swapped
+        tags = np.asarray(shell.face_tags)
+        shell = eqx.tree_at(lambda m: m.face_tags, shell, jnp.asarray(np.where(tags == CORE, FREE, CORE)))
+        faces = elastic.find_cavity_faces(shell, [0.0, 0.0, 0.0])  # the void: every free face
+        np.testing.assert_allclose(elastic.calc_cavity_volume(shell, faces), 4 / 3 * np.pi * a**3, rtol=0.2)  # its polyhedron's
+        cavity = elastic.calc_cavity_fields(elastic.make_elastic_problem(shell, nu), [faces], rtol=1e-10)
+        errors.append(abs(float(cavity.compliances[0]) / exact - 1.0))
+    order = np.log(errors[0] / errors[1]) / np.log(3 / 2)
+    assert errors[1] < 0.05 and 1.7 < order < 3.0, (errors, order)
+
+
+def test_a_pocket_barometer_reads_the_pressure_that_holds_its_volume(tmp_path):
+    """A strip cast over a 2 x 2 x 1 mm pocket (a tray's floor former): pressed on the
+    skin above it, the pocket's rubber squeezes its air. Its reading by reciprocity is
+    the pressure that, added on the pocket's faces, leaves its volume unchanged (a
+    direct solve with both loads), positive, and larger over the pocket than 4 mm
+    off it; the rubber's own stress at the pocket's ceiling (an `elastic` port there)
+    is tension. A port on the skin is no pocket."""
+    from helpers import write_mould
+
+    from hydrotact import HydrotactError
+    from hydrotact.mesh import load_tet_mesh
+
+    tray = write_mould(tmp_path / "tray.stl", ((0, 0, 0), (16, 8, 6)), [((2, 2, 2), (14, 6, 6.5))], formers=[((7, 3, 2), (9, 5, 3))])
+    cast = load_tet_mesh([str(tray)], units="mm", edge_length=0.8)  # 12 x 4 x 4 mm, the pocket at the floor's centre
+    faces = elastic.find_cavity_faces(cast, [0.0, 0.0, 1e-3])
+    corners = np.asarray(cast.vertices)[faces]
+    area = 0.5 * np.sum(np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1))
+    np.testing.assert_allclose(area, 12e-6, rtol=0.02)  # the ceiling 2 x 2 and four walls 2 x 1 mm
+    np.testing.assert_allclose(elastic.calc_cavity_volume(cast, faces), 4e-9, rtol=0.03)
+    with pytest.raises(HydrotactError, match="not in a pocket"):
+        elastic.find_cavity_faces(cast, [0.0, 0.0, 4e-3])
+    problem = elastic.make_elastic_problem(cast, 0.45)
+    cavity = elastic.calc_cavity_fields(problem, [faces], rtol=1e-11)
+    volume_loads = cavity.volume_loads[0]
+    top = np.asarray(cast.boundary_faces)[np.asarray(cast.face_tags) == FREE]
+    top_corners = np.asarray(cast.vertices)[top]
+    on_skin = np.all(np.abs(top_corners[..., 2] - 4e-3) < 1e-5, axis=1)
+
+    def press(x):  # 1 kPa on the skin's faces within 1.5 mm of (x, 0)
+        near = on_skin & np.all(np.abs(top_corners[..., 0] - x) < 1.5e-3, axis=1) & np.all(np.abs(top_corners[..., 1]) < 1.5e-3, axis=1)
+        quadrature = elastic.make_face_quadrature(problem, top[near])
+        return elastic.calc_face_loads(problem, quadrature, -1e3 * jnp.asarray(quadrature.normals_S))
+
+    readings = []
+    for x in (0.0, 4e-3):
+        loads = press(x)
+        squeezed = float(jnp.sum(volume_loads * elastic.solve_elasticity(problem, loads, rtol=1e-11).displacements))
+        reading = float(jnp.sum(loads * cavity.fields.responses[:, 0, :]))
+        np.testing.assert_allclose(reading, -squeezed / float(cavity.compliances[0]), rtol=1e-8)
+        held = elastic.solve_elasticity(problem, loads + reading * volume_loads, rtol=1e-11).displacements
+        assert abs(float(jnp.sum(volume_loads * held))) < 1e-7 * abs(squeezed)  # the pocket keeps its volume
+        readings.append(reading)
+    assert readings[0] > 2.0 * readings[1] > 0.0
+    # With 4 mm³ of air in E = 1 MPa rubber: the air's law p = -K_a dV / V0 holds in a
+    # direct solve with the loads scaled to E and the pocket's pressure on its faces.
+    modulus, air = 1e6, 4e-9
+    reading = readings[0] * float(elastic.calc_air_factor(cavity.compliances[0], modulus, air))
+    grown = float(jnp.sum(volume_loads * elastic.solve_elasticity(problem, press(0.0) + reading * volume_loads, modulus=modulus, rtol=1e-11).displacements))
+    np.testing.assert_allclose(reading, -elastic.AIR_MODULUS * grown / air, rtol=1e-7)
+    assert 0.0 < reading < 0.5 * readings[0]
+    ceiling = elastic.make_barometer_ports([[0.0, 0.0, 1e-3]], [[0.0, 0.0, 1.0]], [0.3e-3])
+    direct = elastic.solve_elasticity(problem, press(0.0), rtol=1e-11)
+    assert float(elastic.calc_port_readings(problem, direct.displacements, ceiling)[0]) < 0.0

@@ -23,6 +23,15 @@ from ._barometers import (
     make_barometer_ports as make_barometer_ports,
 )
 from ._cache import make_field_derivatives as make_field_derivatives, make_receptive_fields as make_receptive_fields
+from ._cavity import (
+    AIR_MODULUS as AIR_MODULUS,
+    CavityFields as CavityFields,
+    calc_air_factor as calc_air_factor,
+    calc_cavity_fields as calc_cavity_fields,
+    calc_cavity_loads as calc_cavity_loads,
+    calc_cavity_volume as calc_cavity_volume,
+    find_cavity_faces as find_cavity_faces,
+)
 from ._loads import (
     FaceQuadrature as FaceQuadrature,
     calc_barycentric as calc_barycentric,
