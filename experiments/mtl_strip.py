@@ -17,11 +17,13 @@ into this repository: the committed results are the table and the figure.
    Eagle file's elements P1…P16) matched to them in order along the strip by one
    translation (fitted; the worst package more than 0.2 mm from its pocket is
    refused), and the four logged channels Sensor_0…3 (P1…P4, the data's README) as
-   barometers at their pockets' ceiling centres reading the elastomer's stress there
-   (`elastic`), beside the same ports with the heuristic cone (`cone`, 40°).
+   barometers at their pockets' ceiling centres, three ways: reading the air sealed in
+   the pocket (`pocket`: an elastic field's `cavity` reading, the pressure that holds
+   the pocket's volume), the rubber's stress at the port (`elastic`), and the heuristic
+   cone (`cone`, 40°).
 2. **The spatial profile**: a 10 mm steel ball (R = 5 mm: the authors' later rig; the
    indenter is not recorded with these logs) pressed `--depth` deep at each x along
-   the strip, each channel's reading against x for both receptive fields (an elastic
+   the strip, each channel's reading against x for each receptive field (an elastic
    material of 1 MPa: the shape, not the scale, is compared); and each calibration
    log's presses, each channel's rise over its pre-press level at the press's
    deepest sample against the stage's x, shifted by the stage-to-board offset that
@@ -61,6 +63,11 @@ EDGE_LENGTH_MM = 1.5
 CONE_HALF_ANGLE_DEG = 40.0
 BALL_RADIUS_M = 5e-3
 MATCH_TOLERANCE_MM = 0.2
+MODELS = {  # the receptive fields compared: the pocket's air, the rubber's stress at the port, the cone heuristic
+    "pocket": {"kind": "elastic", "reading": "cavity"},
+    "elastic": {"kind": "elastic", "port_radius": 0.5, "reading": "pressure"},
+    "cone": {"kind": "cone", "half_angle": CONE_HALF_ANGLE_DEG},
+}
 
 
 def find_design(data: Path) -> tuple[Path, Path]:
@@ -232,7 +239,7 @@ def main() -> None:
     pockets = find_pockets(surface)
     shift, ports = align_board(read_board_parts(board), pockets)
     specs = {}
-    for kind, field in (("elastic", {"kind": "elastic", "port_radius": 0.5, "reading": "pressure"}), ("cone", {"kind": "cone", "half_angle": CONE_HALF_ANGLE_DEG})):
+    for kind, field in MODELS.items():
         path = work / f"{NAME}_sensor_{kind}.json"
         write_text_atomic(path, json.dumps(make_strip_document(mould, ports, field, f"mtl-strip-{kind}"), indent=1) + "\n")
         specs[kind] = load_sensor(path)
@@ -272,13 +279,12 @@ def main() -> None:
     }
     args.output.mkdir(parents=True, exist_ok=True)
     write_text_atomic(args.output / f"{NAME}.json", json.dumps(document, indent=1) + "\n")
-    lines = ["| channel | port x (mm) | measured: peak x (vertex) / width (mm) | elastic: peak x / width (mm), min / max (Pa) | cone: peak x / width (mm), max (Pa) |", "|---|---:|---|---|---|"]
+    lines = ["| channel | port x (mm) | measured: peak x (vertex) / width (mm) | " + " | ".join(f"{kind}: peak x / width (mm), min / max (Pa)" for kind in MODELS) + " |",
+             "|---|---:|---|" + "---|" * len(MODELS)]
     for row in rows:
-        lines.append(
-            f"| {row['channel']} | {row['port_x_mm']:.1f} | {row['measured_peak_x_mm']:.1f} ({row['measured_vertex_x_mm']:.1f}) / {row['measured_width_mm']:.1f} | "
-            f"{row['elastic_peak_x_mm']:.1f} / {row['elastic_width_mm']:.1f}, {row['elastic_min_Pa']:.0f} / {row['elastic_max_Pa']:.0f} | "
-            f"{row['cone_peak_x_mm']:.1f} / {row['cone_width_mm']:.1f}, {row['cone_max_Pa']:.0f} |"
-        )
+        cells = [f"{row[f'{kind}_peak_x_mm']:.1f} / {row[f'{kind}_width_mm']:.1f}, {row[f'{kind}_min_Pa']:.0f} / {row[f'{kind}_max_Pa']:.0f}" for kind in MODELS]
+        shape = f"{row['measured_peak_x_mm']:.1f} ({row['measured_vertex_x_mm']:.1f}) / {row['measured_width_mm']:.1f}"
+        lines.append(f"| {row['channel']} | {row['port_x_mm']:.1f} | {shape} | " + " | ".join(cells) + " |")
     write_text_atomic(args.output / f"{NAME}.md", "\n".join(lines) + "\n")
     _plot(document, measured, args.output / f"{NAME}.png")
     print(f"wrote {args.output / NAME}.{{json,md,png}}")
@@ -292,17 +298,18 @@ def _plot(document: dict, measured: dict, path: Path) -> None:
 
     xs = np.asarray(document["profile_x_mm"])
     offset = document["alignment"]["stage_to_cast_offset_mm"]
-    figure, axes = plt.subplots(1, 3, figsize=(14, 3.8))
+    figure, axes = plt.subplots(1, 1 + len(MODELS), figsize=(4.7 * (1 + len(MODELS)), 3.8))
     for c, channel in enumerate(CHANNELS):
         colour = f"C{c}"
-        for axis, kind in zip(axes[1:], ("elastic", "cone")):
+        for axis, kind in zip(axes[1:], MODELS):
             values = np.asarray(document["profiles_Pa"][kind])[:, c]
             axis.plot(xs, values, color=colour, label=channel)
         for k, presses in enumerate(measured.values()):
             axes[0].plot([x + offset for x, _ in presses], [rise[c] / 1e3 for _, rise in presses], ".", color=colour, ms=3, label=None if k else channel)
     axes[0].set(title="measured: rise at each press's deepest sample", xlabel="x along the strip (mm, stage x + offset)", ylabel="kPa")
-    axes[1].set(title="simulated, elastic (port stress)", xlabel="ball x (mm)", ylabel="Pa (E = 1 MPa)")
-    axes[2].set(title=f"simulated, cone {CONE_HALF_ANGLE_DEG:g}°", xlabel="ball x (mm)", ylabel="Pa (E = 1 MPa)")
+    titles = {"pocket": "simulated, the pocket's air (cavity)", "elastic": "simulated, the rubber's stress at the port", "cone": f"simulated, cone {CONE_HALF_ANGLE_DEG:g}°"}
+    for axis, kind in zip(axes[1:], MODELS):
+        axis.set(title=titles[kind], xlabel="ball x (mm)", ylabel="Pa (E = 1 MPa)")
     for axis in axes:
         axis.legend(fontsize=7)
         axis.grid(alpha=0.3)

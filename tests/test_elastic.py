@@ -774,3 +774,12 @@ def test_a_pocket_barometer_reads_the_pressure_that_holds_its_volume(tmp_path):
     ceiling = elastic.make_barometer_ports([[0.0, 0.0, 1e-3]], [[0.0, 0.0, 1.0]], [0.3e-3])
     direct = elastic.solve_elasticity(problem, press(0.0), rtol=1e-11)
     assert float(elastic.calc_port_readings(problem, direct.displacements, ceiling)[0]) < 0.0
+    # A sensor's `cavity` barometer gets this field (found from its port, cached by its
+    # pocket, no derivatives: the pocket does not move with the port); one on the skin
+    # is refused, naming it.
+    fields = elastic.make_receptive_fields(cast, [[0.1e-3, 0.0, 1e-3]], [[0.0, 0.0, 1.0]], [0.5e-3], ["cavity"], 0.45, cache=False)
+    np.testing.assert_allclose(np.asarray(fields.responses), np.asarray(cavity.fields.responses), rtol=1e-6, atol=1e-9 * float(jnp.max(jnp.abs(cavity.fields.responses))))
+    moved = elastic.make_field_derivatives(cast, [[0.1e-3, 0.0, 1e-3]], [[0.0, 0.0, 1.0]], [0.5e-3], ["cavity"], 0.45, cache=False)
+    assert not np.any(np.asarray(moved.positions)) and not np.any(np.asarray(moved.axes))
+    with pytest.raises(HydrotactError, match="barometer 1: the barometer at .* is not in a pocket"):
+        elastic.make_receptive_fields(cast, [[0.0, 0.0, 1e-3], [0.0, 0.0, 4e-3]], [[0.0, 0.0, 1.0]] * 2, [0.5e-3] * 2, ["cavity"] * 2, 0.45, cache=False)

@@ -280,6 +280,8 @@ def test_mould_geometry(tmp_path):
     assert spec.geometry.kind == "mould" and spec.geometry.surface_units == "mm" and spec.geometry.board == "zmin"
     assert spec.geometry.paths == (str((tmp_path / "cad" / "tray.stl").resolve()),)
     assert spec.is_elastic.all()
+    document["taxels"][1]["receptive_field"]["reading"] = "cavity"  # the air sealed in its pocket
+    assert load_sensor(_write(tmp_path, document, "sealed.json")).taxel_elastic_readings == ("pressure", "cavity")
     mesh = spec.make_mesh()
     np.testing.assert_allclose(float(np.sum(calc_signed_volumes(mesh.vertices, mesh.tets))), (12 * 4 * 4 - 2 * 4) * 1e-9, rtol=2e-3)
     lo, hi = np.asarray(mesh.vertices).min(axis=0), np.asarray(mesh.vertices).max(axis=0)

@@ -52,11 +52,13 @@ from ._quadratic import calc_shape_functions, calc_shape_gradients
 
 class ElasticReading(Choice):
     """What an elastic barometer reads: `pressure`, the hydrostatic pressure
-    -tr(sigma) / 3 at its port (the default), or `normal_stress`, the compressive
-    normal stress along its axis."""
+    -tr(sigma) / 3 at its port (the default), `normal_stress`, the compressive normal
+    stress along its axis, or `cavity`, the air sealed in the pocket its port is in
+    (:mod:`hydrotact.elastic._cavity`: the pressure that holds the pocket's volume)."""
 
     PRESSURE = "pressure"
     NORMAL_STRESS = "normal_stress"
+    CAVITY = "cavity"
 
 
 class BarometerPorts(eqx.Module):

@@ -27,6 +27,7 @@ from .._errors import HydrotactError, where
 from .._files import atomic_path, cache_dir, digest, write_text_atomic
 from ..mesh import TetMesh
 from ._barometers import FieldDerivatives, ReceptiveFields, calc_field_derivatives, calc_receptive_fields, make_barometer_ports
+from ._cavity import calc_cavity_fields, find_cavity_faces
 from ._multigrid import make_multigrid_preconditioner
 from ._problem import make_elastic_problem
 
@@ -86,12 +87,16 @@ def _load_shipped(key: str):
     return response.astype(np.float64), steps, residual
 
 
+def _mesh_key(mesh: TetMesh, poisson_ratio: float) -> str:
+    mesh_parts = [np.ascontiguousarray(np.asarray(mesh.vertices, dtype=np.float64)).tobytes()]
+    mesh_parts += [np.ascontiguousarray(np.asarray(a, dtype=np.int64)).tobytes() for a in (mesh.tets, mesh.boundary_faces, mesh.face_tags)]
+    return digest(_CACHE_VERSION, float(poisson_ratio), *mesh_parts)
+
+
 def field_keys(mesh: TetMesh, ports, poisson_ratio: float) -> list[str]:
     """The content key of each port's receptive field (host): the mesh, nu, the
     port's position and radius, and its axis where it reads the normal stress."""
-    mesh_parts = [np.ascontiguousarray(np.asarray(mesh.vertices, dtype=np.float64)).tobytes()]
-    mesh_parts += [np.ascontiguousarray(np.asarray(a, dtype=np.int64)).tobytes() for a in (mesh.tets, mesh.boundary_faces, mesh.face_tags)]
-    mesh_key = digest(_CACHE_VERSION, float(poisson_ratio), *mesh_parts)
+    mesh_key = _mesh_key(mesh, poisson_ratio)
     positions, axes, radii = (np.asarray(leaf, dtype=np.float64) for leaf in (ports.positions_S, ports.axes_S, ports.port_radii))
     normal = np.asarray(ports.reads_normal_stress, dtype=bool)
     # A pressure port's field does not depend on its axis: turning it solves nothing.
@@ -106,12 +111,20 @@ def _cached_solves(mesh, positions_S, axes_S, port_radii, readings, poisson_rati
     problem = make_elastic_problem(mesh, poisson_ratio, source=source)
     ports = make_barometer_ports(positions_S, axes_S, port_radii, readings)
     keys = field_keys(mesh, ports, float(problem.poisson_ratio))
+    pockets = {}  # barometer -> its pocket's faces, for those reading the sealed air
+    for b, reading in enumerate(readings):
+        if str(reading) == "cavity":
+            try:
+                pockets[b] = find_cavity_faces(mesh, np.asarray(positions_S, dtype=np.float64)[b])
+            except HydrotactError as error:
+                raise HydrotactError(f"{where(source)}barometer {b}: {error}") from None
+            keys[b] = digest(_mesh_key(mesh, float(problem.poisson_ratio)), "cavity", np.ascontiguousarray(np.sort(np.sort(pockets[b], axis=1), axis=0)).tobytes())
     if derivatives:
         keys = [digest(key, "derivatives") for key in keys]
     saved = [(_load(_field_path(key), key) or (None if derivatives else _load_shipped(key))) if cache else None for key in keys]
     missing = [b for b, found in enumerate(saved) if found is None]
     if missing:
-        solved = _solve_fields(problem, ports, missing, progress, source, derivatives=derivatives)
+        solved = _solve_fields(problem, ports, missing, progress, source, derivatives=derivatives, pockets=pockets)
         for b, found in zip(missing, solved, strict=True):
             saved[b] = found
             if cache:
@@ -181,17 +194,20 @@ def make_field_derivatives(
     )
 
 
-def _solve_fields(problem, ports, barometers, progress: bool, source, derivatives: bool = False):
+def _solve_fields(problem, ports, barometers, progress: bool, source, derivatives: bool = False, pockets=None):
     """[(response (num_nodes, 3), CG steps, relative residual)] of each of `barometers`;
     with `derivatives`, the response's derivatives along the port's position and axis
-    (num_nodes, 3, 6) instead (the axis' zero for a pressure port)."""
+    (num_nodes, 3, 6) instead (the axis' zero for a pressure port). A barometer in
+    `pockets` ({index: its pocket's faces}) reads its pocket's air
+    (:func:`calc_cavity_fields`); its field does not move with its port (zero
+    derivatives: the pocket is the cast's)."""
     from tqdm.auto import tqdm
 
     with jax.enable_x64(True):  # a 1e-10 residual is out of float32's reach, whatever the caller's precision
-        return _solve_fields_x64(problem, ports, barometers, progress, source, tqdm, derivatives)
+        return _solve_fields_x64(problem, ports, barometers, progress, source, tqdm, derivatives, pockets or {})
 
 
-def _solve_fields_x64(problem, ports, barometers, progress, source, tqdm, derivatives):
+def _solve_fields_x64(problem, ports, barometers, progress, source, tqdm, derivatives, pockets):
     max_steps = 20 * problem.num_nodes + 1000
     rtol = _DERIVATIVE_RTOL if derivatives else _RTOL
     what = "derivatives of elastic receptive fields" if derivatives else "elastic receptive fields"
@@ -203,7 +219,14 @@ def _solve_fields_x64(problem, ports, barometers, progress, source, tqdm, deriva
         bar.set_postfix_str(f"{multigrid.num_levels} levels")
         for b in barometers:
             one = type(ports)(*(np.asarray(leaf)[b : b + 1] for leaf in (ports.positions_S, ports.axes_S, ports.port_radii, ports.reads_normal_stress)))
-            if derivatives:
+            if b in pockets and derivatives:
+                solved.append((np.zeros((problem.num_nodes, 3, 6)), 0, 0.0))
+                bar.update(1)
+                continue
+            if b in pockets:
+                found = calc_cavity_fields(problem, [pockets[b]], rtol=rtol, max_steps=max_steps, throw=False, multigrid=multigrid).fields
+                response = np.asarray(found.responses)[:, 0]
+            elif derivatives:
                 found = calc_field_derivatives(problem, one, rtol=rtol, max_steps=max_steps, throw=False, multigrid=multigrid)
                 response = np.concatenate([np.asarray(found.positions)[:, 0], np.asarray(found.axes)[:, 0]], axis=-1)
             else:
