@@ -539,7 +539,8 @@ def test_contact_is_continuous_through_every_vertex_layer(pad_field, case):
     force and area change across the layer by no more than in the steps beside it;
     where a probe face lies exactly on a layer of tet faces (the half-space, the
     upright cylinder's tip, the box's bottom and sides), the value there is the mean of
-    the poses 1 nm to either side, to 1e-6 (before the tie rule: twice that)."""
+    the poses 1 nm to either side, to 1e-6 (before the tie rule: twice that), and the
+    poses 1-1024 ulps and 1e-13-1e-12 m to either side give it too (issue 48)."""
     _, field, clusters = pad_field
     label, probe, rotation, capacity = _tie_probes()[case]
     # Rigid meshes follow Drake's 5 pi / 8 rule, which drops the tip's polygons past
@@ -548,10 +549,27 @@ def test_contact_is_continuous_through_every_vertex_layer(pad_field, case):
     step = 2e-6
     offsets = np.array([-2 * step, -step, -1e-9, 0.0, 1e-9, step, 2 * step])
     depths = (layers[:, None] + offsets[None]).reshape(-1)
-    surfaces, _ = compute_contact_surface(field, probe, _poses_at_depths(probe, rotation, depths), capacity, clusters)
+    poses = _poses_at_depths(probe, rotation, depths)
+    # The same batch walks the probe's height through each layer in ulps (the pose a
+    # depth written as 4 mm - 0.5 mm gives) and picometres.
+    at_layer = np.asarray(poses.translation)[3 :: len(offsets)]
+    ulps = np.array([-1024, -16, -2, -1, 1, 2, 16, 1024])
+    heights = [[h + k * np.spacing(h[2]) * np.array([0.0, 0.0, 1.0]) for k in ulps] + [h + np.array([0.0, 0.0, d]) for d in (-1e-12, -1e-13, 1e-13, 1e-12)] for h in at_layer]
+    heights = np.asarray(heights).reshape(-1, 3)
+    rotations = np.broadcast_to(np.asarray(rotation, dtype=np.float64), heights.shape)
+    poses = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), poses, jax.vmap(make_pose)(jnp.asarray(heights), jnp.asarray(rotations)))
+    surfaces, _ = compute_contact_surface(field, probe, poses, capacity, clusters)
     force = np.asarray(jax.vmap(lambda s: s.calc_force())(surfaces))
+    near = slice(len(depths), None)
+    near_force, near_area = -force[near, 2].reshape(len(layers), -1), np.asarray(surfaces.total_area)[near].reshape(len(layers), -1)
+    force = force[: len(depths)]
     normal_force = -force[:, 2].reshape(len(layers), -1)
-    area = np.asarray(surfaces.total_area).reshape(len(layers), -1)
+    area = np.asarray(surfaces.total_area)[: len(depths)].reshape(len(layers), -1)
+    # A hair to either side of a layer the probe's face lies on, the patch is kept once:
+    # within 1e-6 of the tie's own value (before the one tie rule on both sides, a face
+    # a few ulps on the rigid side lost the patch on the layer: half the area, no force).
+    for name, values, near_values in (("force", normal_force, near_force), ("area", area, near_area)):
+        np.testing.assert_allclose(near_values, np.broadcast_to(values[:, 3:4], near_values.shape), rtol=1e-6, err_msg=f"{label}: {name} a hair off the layers")
     assert np.all(normal_force > 0), (label, normal_force)
     for name, values in (("force", normal_force), ("area", area)):
         change = np.abs(np.diff(values[:, [0, 1, 3, 5, 6]], axis=1))  # steps of 2 um; the layer between steps 1 and 2

@@ -145,15 +145,18 @@ def _planes_may_meet(tet, triangle):
     (rows as in :func:`_boxes_meet`, here one pair per column).
 
     Every plane is a face of one of the two convex bodies, so no pair whose
-    intersection has positive area is culled; the face and edge tests cull only pairs
-    apart by more than SEPARATION_TOLERANCE times the coordinates' magnitude (far
-    above round-off).
+    intersection has positive area is culled; the tests cull only pairs apart by more
+    than SEPARATION_TOLERANCE times the coordinates' magnitude (far above round-off).
     """
     heights = _heights_above_triangle_plane(tet, triangle)
     lowest = jnp.minimum(jnp.minimum(heights[0], heights[1]), jnp.minimum(heights[2], heights[3]))
     highest = jnp.maximum(jnp.maximum(heights[0], heights[1]), jnp.maximum(heights[2], heights[3]))
-    meet = (lowest <= 0.0) & (highest >= 0.0)
     scale = _pair_scale(tet, triangle)
+    # A tet that touches the plane from the soft side (its lowest vertex within the
+    # tie tolerance above it) is kept for the tie rule (:func:`_resolve_face_ties`),
+    # which drops its neighbour on the rigid side within the same tolerance: a face a
+    # hair on either side of a tet-face layer keeps its piece once.
+    meet = (lowest <= scale) & (highest >= 0.0)
     for f in range(4):
         row = TET_PLANES + 4 * f
         nearest = None
@@ -247,6 +250,12 @@ def calc_soft_rigid_surface(
     vertices_S = X_SR.apply(jnp.asarray(rigid.vertices_R, dtype))
     triangles = vertices_S[rigid.faces]
     tri_lo, tri_hi = calc_boxes(triangles)
+    # Grown by the tie tolerance (at the largest coordinate of either body, above every
+    # pair's): a triangle a hair outside a tet-face layer still meets the tets on the
+    # layer's other side, and the tie rule (_resolve_face_ties) decides which tet keeps
+    # its piece; the boxes only select candidates.
+    grow = jax.lax.stop_gradient(SEPARATION_TOLERANCE * jnp.maximum(jnp.max(jnp.abs(field.vertices)), jnp.max(jnp.abs(vertices_S))))
+    tri_lo, tri_hi = tri_lo - grow, tri_hi + grow
     tet_points = field.vertices[field.tets]
     face_planes = calc_tet_face_planes(tet_points)  # (num_tets, 4, 4)
     offsets, gradients = calc_tet_pressure_planes(field)
