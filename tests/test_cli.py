@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import assert_one_line_error, box_surface, run_cli
+from helpers import box_surface, run_cli
 
 from hydrotact.field import DEFAULT_MODULUS
 from hydrotact.mesh import CORE, read_mesh
@@ -118,13 +118,6 @@ def test_render_axes_take_round_steps(span, step):
     from hydrotact.viz._render import _nice_step
 
     assert _nice_step(span) == pytest.approx(step)  # the smallest of 1, 2, 2.5, 5 x 10^k with at most 6 steps over the span
-
-
-def test_contact_command_errors():
-    assert_one_line_error(run_cli("contact", "--sensor", "pad5x5", "--probe", "cone:h=1", "--at", "0,0,1mm"), "--probe", "unknown probe")
-    assert_one_line_error(run_cli("contact", "--sensor", "pad5x5", "--probe", "plane", "--at", "0,0"), "--at", "X,Y,DEPTH")
-    assert_one_line_error(run_cli("contact", "--sensor", "pad5x5", "--probe", "plane", "--at", "20mm,0,1mm"), "no part of the sensor lies under")
-    assert_one_line_error(run_cli("contact", "--sensor", "pad5x5", "--probe", "cylinder:d=-2mm", "--at", "0,0,1mm"), "--probe d", "must be positive")
 
 
 def test_every_option_of_every_command_is_documented():
