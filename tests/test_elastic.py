@@ -734,7 +734,7 @@ def test_a_pocket_barometer_reads_the_pressure_that_holds_its_volume(tmp_path):
     from hydrotact.mesh import load_tet_mesh
 
     tray = write_mould(tmp_path / "tray.stl", ((0, 0, 0), (16, 8, 6)), [((2, 2, 2), (14, 6, 6.5))], formers=[((7, 3, 2), (9, 5, 3))])
-    cast = load_tet_mesh([str(tray)], units="mm", edge_length=0.8)  # 12 x 4 x 4 mm, the pocket at the floor's centre
+    cast = load_tet_mesh([str(tray)], units="mm", edge_length=1.0)  # 12 x 4 x 4 mm, the pocket at the floor's centre
     faces = elastic.find_cavity_faces(cast, [0.0, 0.0, 1e-3])
     corners = np.asarray(cast.vertices)[faces]
     area = 0.5 * np.sum(np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1))
