@@ -54,10 +54,11 @@ def calc_air_factor(compliances, modulus, air_volumes, air_modulus=AIR_MODULUS):
 
 def find_cavity_faces(mesh: TetMesh, point, fixed_tag: int = CORE) -> np.ndarray:
     """The boundary faces (F, 3) (vertex indices, wound outward) of the pocket a
-    barometer at `point` (m) reads: the connected set (faces sharing an edge) of the boundary faces that are not
-    fixed to the board, holding the face nearest `point` (host). A pocket is closed by
-    the board: its free faces meet the rest only through fixed ones. Refused where that
-    set is every free face (the barometer is on the elastomer's skin, not in a pocket)."""
+    barometer at `point` (m) reads: the connected set (faces sharing an edge) of the
+    boundary faces that are not fixed to the board, holding the face nearest `point`
+    (host). A pocket is closed by the board (its free faces meet the rest only through
+    fixed ones) or is a void. Refused where that set encloses rubber, not air
+    (:func:`calc_cavity_volume` negative: the barometer is on the elastomer's skin)."""
     faces = np.asarray(mesh.boundary_faces)
     tags = np.asarray(mesh.face_tags)
     vertices = np.asarray(mesh.vertices)
