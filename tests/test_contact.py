@@ -506,7 +506,7 @@ def _tie_probes():
         ("half-space", HalfSpace(), np.zeros(3), Capacity(7680, 8, 8, 7168)),
         ("upright cylinder", make_cylinder_probe(2e-3), np.zeros(3), Capacity(384, 256, 9216, 4096)),
         ("tilted cylinder", make_cylinder_probe(2e-3), tilt, Capacity(640, 256, 7680, 2816)),
-        ("box on the vertex planes", make_box_probe((2.2e-3, 2.2e-3, 2e-3)), np.zeros(3), Capacity(640, 40, 4096, 2048)),
+        ("box on the vertex planes", make_box_probe((2.2e-3, 2.2e-3, 2e-3)), np.zeros(3), Capacity(896, 40, 6144, 2560)),
         ("edge-first box", make_box_probe((3e-3, 3e-3, 2e-3)), np.array([np.pi / 4, 0.0, 0.0]), Capacity(1024, 32, 4096, 1024)),
     ]
 

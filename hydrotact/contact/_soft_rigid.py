@@ -152,11 +152,14 @@ def _planes_may_meet(tet, triangle):
     lowest = jnp.minimum(jnp.minimum(heights[0], heights[1]), jnp.minimum(heights[2], heights[3]))
     highest = jnp.maximum(jnp.maximum(heights[0], heights[1]), jnp.maximum(heights[2], heights[3]))
     scale = _pair_scale(tet, triangle)
-    # A tet that touches the plane from the soft side (its lowest vertex within the
-    # tie tolerance above it) is kept for the tie rule (:func:`_resolve_face_ties`),
-    # which drops its neighbour on the rigid side within the same tolerance: a face a
-    # hair on either side of a tet-face layer keeps its piece once.
-    meet = (lowest <= scale) & (highest >= 0.0)
+    # A tet with a face in the plane from the soft side (three vertices within the tie
+    # tolerance above it) is kept for the tie rule (:func:`_resolve_face_ties`), which
+    # drops its neighbour on the rigid side within the same tolerance: a face a hair on
+    # either side of a tet-face layer keeps its piece once. One touching at an edge or
+    # a vertex only would give a polygon of no area: culled.
+    near = [jnp.where(h <= scale, 1, 0) for h in heights]
+    face_on_plane = (lowest > 0.0) & (near[0] + near[1] + near[2] + near[3] >= 3)
+    meet = ((lowest <= 0.0) & (highest >= 0.0)) | face_on_plane
     for f in range(4):
         row = TET_PLANES + 4 * f
         nearest = None
