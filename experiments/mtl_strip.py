@@ -113,23 +113,13 @@ def find_pockets(surface, board_z: float = 0.0) -> np.ndarray:
     ceiling = np.flatnonzero((normals[:, 2] < -0.99) & (centres[:, 2] > board_z + 1e-6 * scale))
     if len(ceiling) == 0:
         return np.zeros((0, 3))
-    faces = np.asarray(surface.faces)[ceiling]
-    parent = np.arange(len(ceiling))
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
 
-    def root(k):
-        while parent[k] != k:
-            parent[k] = parent[parent[k]]
-            k = parent[k]
-        return k
-
-    owner = {}
-    for k, face in enumerate(faces):
-        for vertex in face:
-            if vertex in owner:
-                parent[root(k)] = root(owner[vertex])
-            else:
-                owner[vertex] = k
-    labels = np.array([root(k) for k in range(len(ceiling))])
+    faces = np.asarray(surface.faces)[ceiling]  # faces sharing a vertex are one patch
+    rows = np.repeat(np.arange(len(ceiling)), 3)
+    incidence = coo_matrix((np.ones(rows.size), (rows, faces.reshape(-1))), shape=(len(ceiling), int(faces.max()) + 1)).tocsr()
+    labels = connected_components(incidence @ incidence.T, directed=False)[1]
     areas = np.asarray(surface.area_faces)[ceiling]
     pockets = np.array([np.average(centres[ceiling][labels == label], axis=0, weights=areas[labels == label]) for label in np.unique(labels)])
     return pockets[np.argsort(pockets[:, 0])]

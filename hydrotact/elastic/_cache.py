@@ -112,13 +112,14 @@ def _cached_solves(mesh, positions_S, axes_S, port_radii, readings, poisson_rati
     ports = make_barometer_ports(positions_S, axes_S, port_radii, readings)
     keys = field_keys(mesh, ports, float(problem.poisson_ratio))
     pockets = {}  # barometer -> its pocket's faces, for those reading the sealed air
+    mesh_key = _mesh_key(mesh, float(problem.poisson_ratio)) if any(str(r) == "cavity" for r in readings) else None
     for b, reading in enumerate(readings):
         if str(reading) == "cavity":
             try:
                 pockets[b] = find_cavity_faces(mesh, np.asarray(positions_S, dtype=np.float64)[b])
             except HydrotactError as error:
                 raise HydrotactError(f"{where(source)}barometer {b}: {error}") from None
-            keys[b] = digest(_mesh_key(mesh, float(problem.poisson_ratio)), "cavity", np.ascontiguousarray(np.sort(np.sort(pockets[b], axis=1), axis=0)).tobytes())
+            keys[b] = digest(mesh_key, "cavity", np.ascontiguousarray(np.sort(np.sort(pockets[b], axis=1), axis=0)).tobytes())
     if derivatives:
         keys = [digest(key, "derivatives") for key in keys]
     saved = [(_load(_field_path(key), key) or (None if derivatives else _load_shipped(key))) if cache else None for key in keys]

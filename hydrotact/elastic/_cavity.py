@@ -32,6 +32,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from .._errors import HydrotactError
 from .._types import Array, Float
@@ -67,22 +69,16 @@ def find_cavity_faces(mesh: TetMesh, point, fixed_tag: int = CORE) -> np.ndarray
         raise HydrotactError("the mesh has no free faces: no pocket to read")
     centroids = vertices[faces[free]].mean(axis=1)
     seed = int(np.argmin(np.linalg.norm(centroids - np.asarray(point, dtype=np.float64)[None], axis=1)))
+    # Faces sharing an edge are neighbours (scipy's connected components over them).
     edges = np.sort(np.concatenate([faces[free][:, [0, 1]], faces[free][:, [1, 2]], faces[free][:, [2, 0]]]), axis=1)
     owners = np.tile(np.arange(len(free)), 3)
     order = np.lexsort((edges[:, 1], edges[:, 0]))
     edges, owners = edges[order], owners[order]
     same = np.all(edges[1:] == edges[:-1], axis=1)
-    neighbours = [[] for _ in range(len(free))]
-    for a, b in zip(owners[:-1][same], owners[1:][same]):
-        neighbours[a].append(b)
-        neighbours[b].append(a)
-    found, stack = {seed}, [seed]
-    while stack:
-        for k in neighbours[stack.pop()]:
-            if k not in found:
-                found.add(k)
-                stack.append(k)
-    pocket = faces[free[np.sort(np.fromiter(found, dtype=np.int64))]]
+    graph = coo_matrix((np.ones(int(same.sum())), (owners[:-1][same], owners[1:][same])), shape=(len(free), len(free)))
+    labels = connected_components(graph, directed=False)[1]
+    found = np.flatnonzero(labels == labels[seed])
+    pocket = faces[free[found]]
     if calc_cavity_volume(mesh, pocket, fixed_tag) <= 0.0:
         at = ", ".join(f"{v * 1e3:g}" for v in np.asarray(point, dtype=np.float64))
         raise HydrotactError(f"the barometer at ({at}) mm is not in a pocket: the free faces nearest it enclose the elastomer (its skin), not air")
