@@ -13,7 +13,7 @@ import pytest
 
 from hydrotact.sysid._solve import solve_least_squares
 from hydrotact.sysid.lumped._lumped import LAG_BOUND, ONSET_HALF_RANGE, PressLayout, calc_press_jacobian, calc_press_predictions, calc_press_residuals, press_residual_fn
-from hydrotact.sysid.lumped._onset_scan import ONSET_SCAN, _site_scan, projection_at, scan_constants
+from hydrotact.sysid.lumped._onset_scan import ONSET_SCAN, SCAN_MIN_GAIN, _lowest_minima, _site_scan, projection_at, scan_constants
 from hydrotact.sysid.lumped._press_data import drift_basis
 from hydrotact.sysid.lumped._press_solve import solve_press_scanned
 from hydrotact.sysid.lumped._press_windows import CONTINUATION_POWER, DEPTH_SCALE, POWERS, _law_inputs, calc_bases, calc_depths, calc_site_bases, make_press_data, window_decay
@@ -207,6 +207,21 @@ def test_the_site_onset_scan_leaves_a_minimum_where_a_sites_presses_all_start_ea
     assert cost(scanned.value) < cost(truth.value) + 1e-3 * num_residuals
     np.testing.assert_allclose(np.asarray(layout.unpack(scanned.value, (start,), (0.0,))[1][0]), onsets, atol=0.03e-3)
     assert np.all(np.abs(np.asarray(layout.unpack(alone.value, (start,), (0.0,))[1][0]) - onsets)[::3] > 0.1e-3)  # site 0's presses
+
+
+def test_the_scan_judges_only_shifts_that_lower_the_chi_square_significantly():
+    """A site's scan with local minima 1.0, 3.0 and 37.0 below the unmoved shift (the
+    trap's gain above): the whole projection judges the trap's alone, and every
+    minimum below the unmoved shift with no threshold; a scale (the χ² per residual)
+    raises the threshold with it."""
+    unmoved = 12
+    costs = np.full(25, 100.0)
+    costs[unmoved] = 90.0
+    costs[[3, 8, 20]] = 90.0 - np.asarray([1.0, 37.0, 3.0])
+    assert SCAN_MIN_GAIN == pytest.approx(3.84, abs=0.01)  # χ²(1)'s 5 % point
+    assert _lowest_minima(costs, unmoved, SCAN_MIN_GAIN) == [8]
+    assert _lowest_minima(costs, unmoved) == [8, 20, 3]
+    assert _lowest_minima(costs, unmoved, SCAN_MIN_GAIN * 10.0) == []
 
 
 def test_the_scans_projected_baselines_give_the_refitted_chi_square():

@@ -162,7 +162,7 @@ def solve_press_scanned(layout: PressLayout, solver, max_steps: int, x0, args, s
     solution, outputs, (chi_square, cost) = solved if solved is not None else _solve_from(layout, solver, max_steps, x0, args)
     for _ in range(ONSET_RESCANS):
         doing(f"the lumped fit's onset scan ({args[0][0].num_sites} sites)")
-        x, scanned = scan_site_onsets(layout, solution.value, args)
+        x, scanned = scan_site_onsets(layout, solution.value, args, scale=max(1.0, chi_square / num_residuals))
         if not scanned < cost * (1.0 - 1e-6):
             break
         rescanned = _solve_press(layout, solver, max_steps, x, args)
