@@ -8,6 +8,7 @@ presses, its position (--position-columns); see hydrotact.sysid.fit_press_logs."
 import json
 from pathlib import Path
 
+from .._errors import HydrotactError
 from ._arguments import number
 
 
@@ -30,8 +31,14 @@ def add_parser(subparsers):
         help="--lumped: the stage position columns naming the sites (default stage_x,stage_y; absent ones are ignored: then one site per press)",
     )
     parser.add_argument(
-        "--drift", default="30", metavar="S|linear|none",
-        help="--lumped: each channel's baseline per log: cubic B-splines with knots S seconds apart (default 30), a line, or a constant",
+        "--rig", type=Path, metavar="RIG.json",
+        help="full mode for stage logs (no probe pose columns): the stage rig (data_schemas/rig.schema.json: the probe, the stage-to-sensor offsets, "
+        "the home and the lag, each fixed or fitted within bounds); with --sensor or the logs' own",
+    )
+    parser.add_argument(
+        "--drift", default=None, metavar="S|linear|none",
+        help="each channel's baseline per log: cubic B-splines with knots S seconds apart, a line, or a constant "
+        "(default: 30 s knots with --lumped or --rig, else a constant)",
     )
     parser.add_argument(
         "--drift-from", default="all", choices=("all", "unloaded"),
@@ -71,14 +78,17 @@ def run(args) -> None:
     from ..sysid import LumpedFit, SimulatorFit, fit_logs, parse_drift, parse_starts
     from ..viz import plot_fit, plot_press_fit
 
+    drift = parse_drift(args.drift if args.drift is not None else ("30" if args.lumped or args.rig else "none"))
     if args.lumped:
+        if args.rig is not None:
+            raise HydrotactError("--rig: a lumped fit has no sensor model to place the probe on; leave out --lumped (a full fit of stage logs) or --rig")
         method = LumpedFit(
             sensor=args.sensor, indentation=args.indentation, position_columns=tuple(name for name in args.position_columns.split(",") if name),
-            drift=parse_drift(args.drift), drift_from=args.drift_from, lag=args.lag, estimate_lag=args.estimate_lag, saturation_pa=args.saturation,
+            drift=drift, drift_from=args.drift_from, lag=args.lag, estimate_lag=args.estimate_lag, saturation_pa=args.saturation,
             threshold=args.press_threshold, starts=parse_starts(args.starts),
         )
     else:
-        method = SimulatorFit(sensor=args.sensor, field=args.field, num_rays=args.rays, progress=not args.json)
+        method = SimulatorFit(sensor=args.sensor, field=args.field, num_rays=args.rays, progress=not args.json, rig=args.rig, drift=drift)
     report = fit_logs(
         args.logs, args.output, method=method, mapping=args.mapping, terms=args.terms, solver=args.solver, tare=args.tare,
         plot=plot_press_fit if args.lumped else plot_fit, max_steps=args.max_steps,
@@ -133,6 +143,11 @@ def print_fit_table(report: dict, truth: dict | None = None) -> None:
         row(f"gain {name}", gain, truth and truth.get("gains", {}).get(name))
     if len(report["gains"]) > 8:
         table.add_row(f"... {len(report['gains']) - 8} more gains in report.json", *[""] * (len(table.columns) - 1))
+    for name, estimate in report.get("rig", {}).items():
+        if estimate["fitted"]:
+            seconds = name == "lag_s"
+            scaled = estimate if seconds else {**estimate, "value": 1e3 * estimate["value"], "std": 1e3 * estimate["std"]}
+            row(f"rig {name.removesuffix('_s')}", scaled, truth and truth.get("rig", {}).get(name), " s" if seconds else " mm")
     Console().print(table)
     for note, names in notes.items():
         print(f"  not identified: {', '.join(names)}: {note}")

@@ -25,6 +25,7 @@ from ._material import (
     read_material as read_material,
     write_material as write_material,
 )
+from ._rig import Rig as Rig, RigParameter as RigParameter, read_rig as read_rig
 from ._table import (
     sensor_spec as sensor_spec,
 )

@@ -28,6 +28,7 @@ from ._model import (
     with_barometer_positions as with_barometer_positions,
 )
 from ._reach import check_reach as check_reach
+from ._rig import RigTable as RigTable, calc_rig_inputs as calc_rig_inputs, make_rig_table as make_rig_table
 from ._simulate import (
     CONTACT_THRESHOLD_N as CONTACT_THRESHOLD_N,
     Samples as Samples,

@@ -25,6 +25,7 @@ from ..visco import Prony
 from ._initial import _MODULUS_FLOOR, design_block, fit_linear_moduli, make_tau_grid, merge_terms
 from ._model import ParameterLayout, calc_predictions, calc_residuals, make_layout, pack
 from ._problem import FitProblem
+from ._rig_problem import BOUND_FRACTION, rig_start
 from ._solve import BoundedLBFGSB, Solver, calc_jacobian, check_solver, raise_if_failed, solve_least_squares, solver_name
 
 MAX_AUTO_TERMS = 4
@@ -163,7 +164,7 @@ class FitResult:
         names = []
         for k, ((modulus_ok, _), (tau_ok, _)) in enumerate(self.identification()):
             names += [name for name, ok in ((f"E{k + 1}", modulus_ok), (f"τ{k + 1}", tau_ok)) if not ok]
-        return names
+        return names + [name for name, (ok, _) in self.rig_identification().items() if not ok]
 
     @property
     def instantaneous_modulus(self) -> Estimate:
@@ -183,15 +184,50 @@ class FitResult:
         return {name: self._estimate(f"log_gain[{name}]") for name in self.problem.gain_names}
 
     def offsets(self) -> list[dict]:
-        """Per log: channel -> offset estimate (Pa)."""
+        """Per log: channel -> offset estimate (Pa); with a drifting baseline, its
+        value at the log's first sample."""
         result = []
-        for k, (info, log) in enumerate(zip(self.problem.infos, self.problem.logs)):
+        for k, (info, log, size) in enumerate(zip(self.problem.infos, self.problem.logs, self.layout.drifts)):
             entries = {}
             for c, channel in enumerate(info.channels):
-                theta = self._estimate(f"offset[{k + 1}/{channel}]", positive=False)
                 base, scale = float(log.offset_base[c]), float(log.offset_scale[c])
-                entries[channel] = Estimate(base + scale * theta.value, scale * theta.std)
+                if size == 1:
+                    theta = self._estimate(f"offset[{k + 1}/{channel}]", positive=False)
+                    entries[channel] = Estimate(base + scale * theta.value, scale * theta.std)
+                    continue
+                index = [self.names.index(f"drift[{k + 1}/{channel}/{j + 1}]") for j in range(size)]
+                row = np.asarray(log.drift)[0]
+                variance = float(row @ self.covariance[np.ix_(index, index)] @ row)
+                entries[channel] = Estimate(base + scale * float(row @ self.x[index]), scale * float(np.sqrt(max(variance, 0.0))))
             result.append(entries)
+        return result
+
+    def rig_parameters(self) -> dict:
+        """The rig's parameters (m, s): name -> Estimate (standard error 0 where fixed);
+        empty without a rig."""
+        rig = self.problem.rig
+        if rig is None:
+            return {}
+        centre, half = np.asarray(rig.centre), np.asarray(rig.half)
+        u = np.zeros(len(centre))
+        std = np.zeros(len(centre))
+        for k in self.layout.rig_free:
+            index = self.names.index(f"rig[{rig.names[k]}]")
+            u[k], std[k] = self.x[index], self.std_log[index]
+        values = centre + half * np.tanh(u)
+        stds = half * (1.0 - np.tanh(u) ** 2) * std
+        return {name: Estimate(float(v), float(e)) for name, v, e in zip(rig.names, values, stds)}
+
+    def rig_identification(self) -> dict:
+        """Per fitted rig parameter: (identified, why not): one within 2 % of its
+        range from a bound is where the bound stopped it, not where the logs put it."""
+        rig = self.problem.rig
+        if rig is None:
+            return {}
+        result = {}
+        for k in self.layout.rig_free:
+            u = self.x[self.names.index(f"rig[{rig.names[k]}]")]
+            result[rig.names[k]] = (True, "") if abs(np.tanh(u)) < BOUND_FRACTION else (False, "at a bound of the rig's range")
         return result
 
     def predictions(self) -> list[np.ndarray]:
@@ -261,15 +297,20 @@ def make_initial_guess(problem: FitProblem, num_terms: int) -> tuple[ParameterLa
     floor = _MODULUS_FLOOR * total
     long_term = max(float(moduli[0]), floor)
     taus, term_moduli = merge_terms(grid, moduli[1:], num_terms, floor)
-    x0 = pack(layout, long_term=long_term, moduli=term_moduli, taus=taus, gains=np.ones(layout.num_gains), offsets=np.zeros(layout.num_channels))
-    # Offsets: the mean misfit of each channel at the start, in noise units.
+    rig = () if problem.rig is None else rig_start(problem.rig, layout.rig_free, problem.rig_start)
+    x0 = pack(layout, long_term=long_term, moduli=term_moduli, taus=taus, gains=np.ones(layout.num_gains), offsets=np.zeros(layout.num_offsets), rig=rig)
+    # Baselines: each channel's misfit at the start, in noise units, on its drift basis
+    # (its mean, for a constant offset), over the samples that count.
     predictions = _predict(jnp.asarray(x0), problem.without_infos(), layout)
     first = layout.num_material + layout.num_gains
-    for log, prediction in zip(problem.logs, predictions):
+    for log, prediction, size in zip(problem.logs, predictions, layout.drifts):
         count = log.num_channels
-        misfit = np.mean(np.asarray(log.observed)[:, :count] - np.asarray(prediction)[:, :count], axis=0)
-        x0[first : first + count] = misfit / np.asarray(log.offset_scale)
-        first += count
+        misfit = (np.asarray(log.observed)[:, :count] - np.asarray(prediction)[:, :count]) / np.asarray(log.offset_scale)
+        basis, used = np.asarray(log.drift), np.asarray(log.weights)[:, :count] > 0.0
+        for c in range(count):
+            rows = used[:, c] if used[:, c].sum() >= size else np.ones(len(basis), dtype=bool)
+            x0[first + c * size : first + (c + 1) * size] = np.linalg.lstsq(basis[rows], misfit[rows, c], rcond=None)[0]
+        first += count * size
     return layout, x0
 
 

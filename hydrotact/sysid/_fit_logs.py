@@ -16,7 +16,8 @@ import numpy as np
 
 from .._errors import HydrotactError, warn
 from .._files import check_output
-from ..data import LogWarning, read_log, sensor_spec, tare_log
+from ..data import LogWarning, read_log, read_rig, sensor_spec, tare_log
+from ._drift import parse_drift
 from ._fit import CHI_SQUARE_WARNING, MAX_AUTO_TERMS, fit_auto, fit_problem
 from ._problem import check_pose_columns, find_clipped_readings, log_probe, make_fit_problem
 from ._report import write_fit_outputs
@@ -97,12 +98,18 @@ class SimulatorFit:
     """The simulator fit as :func:`fit_logs`'s `method` (settings only; the default,
     the command line's `fit` without --lumped): the logs' `sensor` (a built-in name
     or a spec file) where their metadata names none, the strain `field` and the
-    taxels' `num_rays` (default: the logs' own), and whether to show `progress`."""
+    taxels' `num_rays` (default: the logs' own), and whether to show `progress`.
+    For stage logs, which have no probe pose, a `rig` (a :class:`hydrotact.data.Rig`
+    or its file) places the probe from the stage's columns and fits its offsets,
+    home and lag; `drift` is each channel's baseline per log ("none": a constant
+    offset, "linear", or a spline knot spacing in s)."""
 
     sensor: str | None = None
     field: str | None = None
     num_rays: int | None = None
     progress: bool = True
+    rig: object = None
+    drift: object = "none"
 
 
 def fit_logs(paths, output, *, method=None, terms="auto", solver=None, tare=False, mapping=None, plot=None, max_steps=None) -> dict:
@@ -137,15 +144,21 @@ def fit_logs(paths, output, *, method=None, terms="auto", solver=None, tare=Fals
     if isinstance(method, LumpedFit):  # the solver as given: a named one steps with the press model's settings
         return _fit_press_files(paths, output, method, mapping, terms, given, tare, plot, max_steps)
     sensor, field, num_rays, progress = method.sensor, method.field, method.num_rays, method.progress
+    rig = read_rig(method.rig) if isinstance(method.rig, (str, Path)) else method.rig
+    drift = parse_drift(method.drift)
     logs = read_logs([Path(p) for p in paths], mapping, sensor)
     for log, path in zip(logs, paths):  # every log checked before the first is simulated
-        check_pose_columns(log, str(path))
+        if rig is None:
+            check_pose_columns(log, str(path))
+        else:
+            rig.stage_columns(log, str(path))
         if sensor_spec(log.metadata["sensor"], str(path)) is None:
             raise HydrotactError(
                 f"{path}: sensor: {log.metadata['sensor']!r} is neither a built-in sensor nor a sensor JSON file here: a full fit simulates the sensor "
                 "(name an existing spec in the log's metadata, relative to this folder), or fit --lumped"
             )
-        log_probe(log, str(path))
+        if rig is None:
+            log_probe(log, str(path))
     sensors = list(dict.fromkeys(log.metadata["sensor"] for log in logs))
     if len(sensors) > 1:  # each sensor keeps its own gains; the material is one
         warn(
@@ -162,7 +175,7 @@ def fit_logs(paths, output, *, method=None, terms="auto", solver=None, tare=Fals
                 f"{path}: {int(clipped.sum())} readings on {len(names)} channels ({', '.join(names[:4])}{', ...' if len(names) > 4 else ''}) sit at the "
                 "part's range limits (the barometer clipped them): masked, not fitted"
             )
-    problem = make_fit_problem(logs, field=field, num_rays=num_rays, sources=[str(p) for p in paths], progress=progress)
+    problem = make_fit_problem(logs, field=field, num_rays=num_rays, sources=[str(p) for p in paths], progress=progress, rig=rig, drift=drift)
     counts = list(range(MAX_AUTO_TERMS + 1)) if terms == "auto" else [terms]
     with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} fits"), TimeElapsedColumn(), transient=True, disable=not progress) as bar:
         task = bar.add_task(f"fitting ({name})", total=len(counts))

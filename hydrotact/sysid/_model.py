@@ -5,7 +5,8 @@ All parameters live in one flat vector x, positive ones as logarithms:
     log E∞
     log E₁ … log E_K, log τ₁ … log τ_K
     log gain  per free channel gain
-    θ         per log and channel: offset = base + noise · θ
+    θ         per log, channel and drift column: baseline = base + noise · (drift @ θ)
+    u         per fitted rig parameter (stage logs): value = centre + half · tanh(u)
 
 The residuals are (observed − model) / noise, stacked over logs, samples and columns.
 """
@@ -16,6 +17,7 @@ import numpy as np
 
 from ..visco import Prony, calc_contact_response
 from ._problem import FitProblem
+from ._rig_problem import rig_log_inputs, rig_values
 
 
 class ParameterLayout(eqx.Module):
@@ -24,6 +26,8 @@ class ParameterLayout(eqx.Module):
     num_terms: int = eqx.field(static=True)
     num_gains: int = eqx.field(static=True)
     channel_counts: tuple[int, ...] = eqx.field(static=True)
+    drift_sizes: tuple[int, ...] = eqx.field(static=True, default=())  # D per log (default 1)
+    rig_free: tuple[int, ...] = eqx.field(static=True, default=())  # the fitted rig parameters (RigArrays.names' indices)
 
     @property
     def num_material(self) -> int:
@@ -34,8 +38,16 @@ class ParameterLayout(eqx.Module):
         return sum(self.channel_counts)
 
     @property
+    def drifts(self) -> tuple[int, ...]:
+        return self.drift_sizes or (1,) * len(self.channel_counts)
+
+    @property
+    def num_offsets(self) -> int:
+        return sum(c * d for c, d in zip(self.channel_counts, self.drifts))
+
+    @property
     def size(self) -> int:
-        return self.num_material + self.num_gains + self.num_channels
+        return self.num_material + self.num_gains + self.num_offsets + len(self.rig_free)
 
     def names(self, problem: FitProblem) -> list[str]:
         """Parameter names, in x's order (as in the covariance matrix)."""
@@ -43,8 +55,11 @@ class ParameterLayout(eqx.Module):
         names += [f"log_modulus_{k + 1}" for k in range(self.num_terms)]
         names += [f"log_tau_{k + 1}" for k in range(self.num_terms)]
         names += [f"log_gain[{name}]" for name in problem.gain_names]
-        labels = [f"{k + 1}/{channel}" for k, info in enumerate(problem.infos) for channel in info.channels]
-        names += [f"offset[{label}]" for label in labels]
+        for k, (info, size) in enumerate(zip(problem.infos, self.drifts)):
+            for channel in info.channels:
+                names += [f"offset[{k + 1}/{channel}]"] if size == 1 else [f"drift[{k + 1}/{channel}/{j + 1}]" for j in range(size)]
+        if self.rig_free:
+            names += [f"rig[{problem.rig.names[k]}]" for k in self.rig_free]
         return names
 
     def unpack(self, x):
@@ -61,12 +76,25 @@ class ParameterLayout(eqx.Module):
         moduli = jnp.exp(take(self.num_terms))
         taus = jnp.exp(take(self.num_terms))
         gains = jnp.exp(take(self.num_gains))
-        offsets = take(self.num_channels)
-        return {"prony": Prony(long_term, moduli, taus), "gains": gains, "offsets": offsets}
+        offsets = take(self.num_offsets)
+        rig = take(len(self.rig_free))
+        return {"prony": Prony(long_term, moduli, taus), "gains": gains, "offsets": offsets, "rig": rig}
 
 
 def make_layout(problem: FitProblem, num_terms: int) -> ParameterLayout:
-    return ParameterLayout(num_terms=int(num_terms), num_gains=len(problem.gain_names), channel_counts=tuple(log.num_channels for log in problem.logs))
+    return ParameterLayout(
+        num_terms=int(num_terms), num_gains=len(problem.gain_names), channel_counts=tuple(log.num_channels for log in problem.logs),
+        drift_sizes=tuple(int(log.drift.shape[1]) for log in problem.logs), rig_free=() if problem.rig is None else problem.rig.free,
+    )
+
+
+def calc_inputs(x, problem: FitProblem, layout: ParameterLayout):
+    """Each log's unit responses (T, C + F) at x: the log's own, or, for stage logs,
+    read off the rig's table at x's rig parameters."""
+    if problem.rig is None:
+        return tuple(log.inputs for log in problem.logs)
+    values = rig_values(problem.rig, layout.rig_free, layout.unpack(x)["rig"])
+    return tuple(rig_log_inputs(problem.rig, values, k, log.times) for k, log in enumerate(problem.logs))
 
 
 def calc_predictions(x, problem: FitProblem, layout: ParameterLayout, method: str = "scan"):
@@ -76,12 +104,13 @@ def calc_predictions(x, problem: FitProblem, layout: ParameterLayout, method: st
     gains_all = jnp.concatenate([parameters["gains"], jnp.ones((1,), x.dtype)])
     predictions = []
     first = 0
-    for log, count in zip(problem.logs, layout.channel_counts):
-        offsets = log.offset_base + log.offset_scale * parameters["offsets"][first : first + count]
-        first += count
-        response = calc_contact_response(prony, log.times, log.inputs, method=method)
+    for log, inputs, count, size in zip(problem.logs, calc_inputs(x, problem, layout), layout.channel_counts, layout.drifts):
+        theta = parameters["offsets"][first : first + count * size].reshape(count, size)
+        first += count * size
+        baselines = log.offset_base[None, :] + log.offset_scale[None, :] * (log.drift @ theta.T)  # (T, C)
+        response = calc_contact_response(prony, log.times, inputs, method=method)
         gains = gains_all[log.gain_index]  # index -1 picks the fixed 1
-        channels = offsets[None, :] + gains[None, :] * response[:, :count]
+        channels = baselines + gains[None, :] * response[:, :count]
         predictions.append(jnp.concatenate([channels, response[:, count:]], axis=1))
     return tuple(predictions)
 
@@ -92,11 +121,12 @@ def calc_residuals(x, problem: FitProblem, layout: ParameterLayout):
     return jnp.concatenate([((log.observed - prediction) * log.weights).reshape(-1) for log, prediction in zip(problem.logs, predictions)])
 
 
-def pack(layout: ParameterLayout, *, long_term, moduli, taus, gains, offsets) -> np.ndarray:
-    """The flat x from natural-scale numbers (host)."""
+def pack(layout: ParameterLayout, *, long_term, moduli, taus, gains, offsets, rig=()) -> np.ndarray:
+    """The flat x from natural-scale numbers (host; `rig` the fitted rig parameters'
+    u, :func:`rig_start`)."""
     pieces = [np.log([long_term])]
     pieces += [np.log(np.asarray(moduli, dtype=np.float64)), np.log(np.asarray(taus, dtype=np.float64))]
-    pieces += [np.log(np.asarray(gains, dtype=np.float64)), np.asarray(offsets, dtype=np.float64)]
+    pieces += [np.log(np.asarray(gains, dtype=np.float64)), np.asarray(offsets, dtype=np.float64), np.asarray(rig, dtype=np.float64)]
     x = np.concatenate([np.atleast_1d(piece) for piece in pieces])
     assert x.shape == (layout.size,)
     return x

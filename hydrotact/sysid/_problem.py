@@ -30,6 +30,8 @@ import numpy as np
 from .._errors import HydrotactError
 from .._types import Array, Float, Int
 from ..data import estimate_noise
+from ._drift import drift_basis
+from ._rig_problem import RigArrays, make_rig_arrays, rig_log_inputs
 
 FORCE_COLUMNS = ("fx", "fy", "fz")
 POSE_COLUMNS = ("probe_x", "probe_y", "probe_z")
@@ -62,8 +64,13 @@ class LogArrays(eqx.Module):
     - `observed` (T, C + F): the channels (Pa) and the reference forces (N).
     - `weights` (T, C + F): 1 / noise standard deviation; 0 where a barometer
       clipped (a reading at or beyond its part's range: the pressure is unknown there).
-    - `offset_base`, `offset_scale` (C,): the channel offset is base + scale · θ.
+    - `offset_base`, `offset_scale` (C,): the channel's baseline is base + scale ·
+      (drift @ θ) with θ (D,) per channel.
+    - `drift` (T, D): the baseline's basis (a column of ones: a constant offset).
     - `gain_index` (C,): index into the shared gains, −1 for a fixed gain of 1.
+
+    With a rig (:class:`FitProblem` `rig`), `inputs` are those at the rig's starts
+    (for the linear start); the fit reads them off the rig's table at each step.
     """
 
     times: Float[Array, " num_samples"]
@@ -72,6 +79,7 @@ class LogArrays(eqx.Module):
     weights: Float[Array, "num_samples num_columns"]
     offset_base: Float[Array, " num_channels"]
     offset_scale: Float[Array, " num_channels"]
+    drift: Float[Array, "num_samples num_drift"]
     gain_index: Int[Array, " num_channels"]
     num_channels: int = eqx.field(static=True)
 
@@ -93,12 +101,16 @@ class FitProblem(eqx.Module):
     """A system-identification problem: the logs and how they are modelled.
 
     `gain_names` the shared channel gains that are free (keyed `sensor/channel`);
-    `logs` LogArrays; `infos` LogInfo per log (static).
+    `logs` LogArrays; `infos` LogInfo per log (static); `rig` the stage rig's
+    arrays (:class:`RigArrays`: its table, the stage columns, the bounds) for stage
+    logs, with `rig_start` (static) every rig parameter's start; else None.
     """
 
     logs: tuple[LogArrays, ...]
     gain_names: tuple[str, ...] = eqx.field(static=True)
     infos: tuple[LogInfo, ...] = eqx.field(static=True)
+    rig: RigArrays | None = None
+    rig_start: tuple[float, ...] = eqx.field(static=True, default=())
 
     @property
     def num_samples(self) -> int:
@@ -109,7 +121,7 @@ class FitProblem(eqx.Module):
         """The same problem without the per-log descriptions: what jitted calls get,
         so that logs of the same shapes share one compilation (the descriptions are
         static and differ from log to log)."""
-        return FitProblem(logs=self.logs, gain_names=self.gain_names, infos=())
+        return FitProblem(logs=self.logs, gain_names=self.gain_names, infos=(), rig=self.rig, rig_start=self.rig_start)
 
 
 def file_digest(path) -> str | None:
@@ -146,20 +158,27 @@ def log_probe(log, source: str):
         raise HydrotactError(f"{source}: probe: {str(error).removeprefix('--probe').lstrip(': ')}") from None
 
 
+def _log_model(log, source: str, field: str, num_rays: int):
+    """The sensor model a log's metadata names, checked against its channels."""
+    from ..sensors import load_sensor
+    from ..sim import make_sensor_model
+
+    metadata = log.metadata
+    spec = load_sensor(metadata["sensor"], source=f"{source}: sensor")
+    if spec.num_taxels != len(metadata["channels"]):
+        raise HydrotactError(f"{source}: channels: {len(metadata['channels'])} channels, but sensor {spec.name} has {spec.num_taxels} taxels")
+    return make_sensor_model(spec, field_kind=field, num_rays=num_rays)
+
+
 def _unique_pose_responses(log, source: str, field: str, num_rays: int, progress: bool):
     """Unit responses of the log's taxels and contact force at its probe poses: each
     distinct pose is simulated once (holds repeat poses), through the simulator's
     cache of unit responses (so a log simulated by hydrotact fits at once)."""
-    from ..sensors import load_sensor
-    from ..sim import compute_trajectory_responses, make_sensor_model, make_trajectory
+    from ..sim import compute_trajectory_responses, make_trajectory
 
-    metadata = log.metadata
     check_pose_columns(log, source)
-    spec = load_sensor(metadata["sensor"], source=f"{source}: sensor")
-    if spec.num_taxels != len(metadata["channels"]):
-        raise HydrotactError(f"{source}: channels: {len(metadata['channels'])} channels, but sensor {spec.name} has {spec.num_taxels} taxels")
+    model = _log_model(log, source, field, num_rays)
     probe = log_probe(log, source)
-    model = make_sensor_model(spec, field_kind=field, num_rays=num_rays)
     rows = _log_pose_rows(log)
     trajectory = make_trajectory(np.asarray(log.times, dtype=np.float64), rows[:, :3], rows[:, 3:], source=source)
     unit = compute_trajectory_responses(model, probe, trajectory, progress=progress)
@@ -172,7 +191,7 @@ def _channel_values(log) -> np.ndarray:
 
 def make_fit_problem(
     logs, *, field: str | None = None, num_rays: int | None = None, use_forces: bool = True,
-    unit_responses=None, sources=None, progress: bool = False,
+    unit_responses=None, sources=None, progress: bool = False, rig=None, drift="none",
 ) -> FitProblem:
     """Build a FitProblem from BarometerLogs (host).
 
@@ -188,13 +207,31 @@ def make_fit_problem(
     - `unit_responses`: per log, (taxel pressures (T, C), force (T, 3)) per
       pascal of E, if already computed (else simulated here from the logged poses).
     - `sources`: names for messages and the report (default: the log's path or index).
+    - `rig`: a :class:`hydrotact.data.Rig` for stage logs (no probe pose columns): the
+      probe's pose comes from the stage's columns, and its offsets, the home per log
+      and the lag are fitted within the rig's bounds (the logs must share one
+      sensor; the rig names the probe).
+    - `drift`: each channel's baseline per log: "none" (a constant offset),
+      "linear", or a knot spacing in s (cubic B-splines: a drifting barometer).
     """
     if not logs:
         raise HydrotactError("no logs to fit")
     if num_rays is not None and (int(num_rays) != num_rays or num_rays < 1):
         raise HydrotactError(f"--rays: rays per taxel must be at least 1, got {num_rays}")
     sources = list(sources) if sources is not None else [f"log {k + 1}" for k in range(len(logs))]
-    prepared, infos, gain_names = [], [], []
+    rig_arrays = rig_starts = None
+    if rig is not None:
+        from ..contact import parse_probe
+
+        sensors = {log.metadata["sensor"] for log in logs}
+        if len(sensors) > 1:
+            raise HydrotactError(f"--rig: the logs come from {len(sensors)} sensors ({', '.join(sorted(sensors))}); a rig's logs are of one sensor")
+        log_field = logs[0].metadata.get("field", "laplace") if field is None else field
+        log_rays = logs[0].metadata.get("num_rays", 64) if num_rays is None else num_rays
+        model = _log_model(logs[0], sources[0], log_field, log_rays)
+        every = [np.arange(len(log.metadata["channels"]) + 3) for log in logs]
+        rig_arrays, rig_starts = make_rig_arrays(rig, model, parse_probe(rig.probe), logs, sources, every, progress=progress)
+    prepared, infos, gain_names, columns = [], [], [], []
     for k, (log, source) in enumerate(zip(logs, sources)):
         if log.num_samples < 8:
             raise HydrotactError(f"{source}: {log.num_samples} samples; a fit needs at least 8")
@@ -207,6 +244,9 @@ def make_fit_problem(
             taxels, forces = (np.asarray(a, dtype=np.float64) for a in unit_responses[k])
             if taxels.shape != observed.shape or forces.shape != (len(times), 3):
                 raise HydrotactError(f"{source}: unit responses of shapes {taxels.shape} and {forces.shape} do not match {observed.shape} channels and (T, 3) forces")
+        elif rig_arrays is not None:
+            full = np.asarray(rig_log_inputs(rig_arrays, jnp.asarray(rig_starts), k, jnp.asarray(times)))
+            taxels, forces = full[:, : len(channels)], full[:, len(channels) :]
         else:
             log_field = metadata.get("field", "laplace") if field is None else field
             log_rays = metadata.get("num_rays", 64) if num_rays is None else num_rays
@@ -217,6 +257,9 @@ def make_fit_problem(
             keep = [FORCE_COLUMNS.index(name) for name in force_columns]
             inputs = np.column_stack([taxels, forces[:, keep]])
             observed = np.column_stack([observed] + [np.asarray(log.columns[name], dtype=np.float64) for name in force_columns])
+            columns.append(list(range(len(channels))) + [len(channels) + i for i in keep])
+        else:
+            columns.append(list(range(len(channels))))
         num_channels = len(channels)
         clipped = np.zeros(observed.shape, dtype=bool)
         clipped[:, :num_channels] = find_clipped_readings(log, observed[:, :num_channels])
@@ -238,6 +281,7 @@ def make_fit_problem(
                 weights=jnp.asarray(np.where(clipped, 0.0, 1.0 / noise[None, :])),
                 offset_base=jnp.asarray(baseline),
                 offset_scale=jnp.asarray(noise[:num_channels]),
+                drift=jnp.asarray(drift_basis(times, drift)),
                 gain_index=jnp.asarray(gain_index),
                 num_channels=num_channels,
             )
@@ -248,4 +292,9 @@ def make_fit_problem(
                 pressure=log.metadata.get("pressure", "absolute"), sha256=file_digest(source), noise=tuple(float(v) for v in noise),
             )
         )
-    return FitProblem(logs=tuple(prepared), gain_names=tuple(gain_names), infos=tuple(infos))
+    if rig_arrays is not None:
+        rig_arrays = eqx.tree_at(lambda r: r.columns, rig_arrays, tuple(jnp.asarray(c) for c in columns))
+    return FitProblem(
+        logs=tuple(prepared), gain_names=tuple(gain_names), infos=tuple(infos), rig=rig_arrays,
+        rig_start=() if rig_starts is None else tuple(float(v) for v in rig_starts),
+    )

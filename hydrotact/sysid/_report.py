@@ -102,6 +102,13 @@ def make_report(result: FitResult) -> dict:
         "offsets_Pa": [{"source": info.source, "channels": {k: v.to_json() for k, v in offsets.items()}} for info, offsets in zip(result.problem.infos, result.offsets())],
         "residuals": result.residual_diagnostics(),
     }
+    if result.problem.rig is not None:
+        verdicts = result.rig_identification()
+        report["rig"] = {
+            name: {**_identified(estimate, verdicts.get(name, (True, ""))), "fitted": name in verdicts}
+            for name, estimate in result.rig_parameters().items()
+        }
+        report["drift_columns"] = list(result.layout.drifts)
     if result.criteria:
         report["criterion"] = {"name": "bic", "by_num_terms": {str(k): v for k, v in result.criteria.items()}}
     return report

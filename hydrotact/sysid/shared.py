@@ -4,6 +4,7 @@ read logs, choose and run solvers, judge what the logs identify, warn on a poor 
 and write their outputs the same way. The lumped package imports these from here and
 nothing private from its parent."""
 
+from ._drift import drift_basis as drift_basis, parse_drift as parse_drift
 from ._fit import CHI_SQUARE_WARNING as CHI_SQUARE_WARNING, identify_time as identify_time
 from ._fit_logs import read_logs as read_logs
 from ._problem import file_digest as file_digest

@@ -8,13 +8,13 @@ press's onset estimated from the readings' first rise, and each log's baseline b
 """
 
 import dataclasses
-import math
 import warnings
 
 import numpy as np
 
 from ..._errors import HydrotactError, warn
 from ...data import estimate_noise, sensor_spec
+from ..shared import drift_basis as drift_basis, parse_drift as parse_drift
 from ._lumped import ONSET_HALF_RANGE
 from ._press_windows import PressData, make_press_data
 from ._presses import GAP_FACTOR, POSITION_COLUMNS, PRESS_THRESHOLD, SITE_TOLERANCE, find_log_presses
@@ -35,36 +35,6 @@ KINK_WINDOW = 3  # samples on each side over which the stage's speed is measured
 # model's own misfit passes into the shape instead (~3 std low: tests/test_press_fit.py).
 # "unloaded" is the check that a slow term is not drift.
 DRIFT_FROM = ("all", "unloaded")
-
-
-def drift_basis(times, drift) -> np.ndarray:
-    """(T, D) the baseline basis of a log: drift "none" (a constant), "linear", or a
-    knot spacing in s (cubic B-splines over the log, at least one interval)."""
-    times = np.asarray(times, dtype=np.float64)
-    span = max(float(times[-1] - times[0]), 1e-12)
-    scaled = (times - times[0]) / span
-    if drift == "none":
-        return np.ones((len(times), 1))
-    if drift == "linear":
-        return np.column_stack([np.ones_like(scaled), 2.0 * scaled - 1.0])
-    from scipy.interpolate import BSpline
-
-    intervals = max(1, math.ceil(span / float(drift)))
-    knots = np.concatenate([[0.0] * 3, np.linspace(0.0, 1.0, intervals + 1), [1.0] * 3])
-    return BSpline.design_matrix(np.clip(scaled, 0.0, 1.0), knots, 3).toarray()
-
-
-def parse_drift(text):
-    """'none', 'linear' or a knot spacing in seconds (a positive number)."""
-    if text in ("none", "linear"):
-        return text
-    try:
-        value = float(text)
-    except (TypeError, ValueError):
-        raise HydrotactError(f"--drift: expected none, linear or a knot spacing in seconds, got {text!r}") from None
-    if not value > 0.0 or not math.isfinite(value):
-        raise HydrotactError(f"--drift: the knot spacing must be a positive number of seconds, got {text!r}")
-    return value
 
 
 def upper_limit(log, source, saturation_pa=None):

@@ -1,0 +1,154 @@
+"""Full-mode fits of stage logs through a rig: the probe placed from the stage's
+columns, the rig's offsets, home and lag fitted with the material on a drifting
+baseline (known truth, on the stand-in), the table's gradients against finite
+differences, the command line, and the rig file's errors."""
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import assert_one_line_error, run_main
+
+from hydrotact import HydrotactError
+from hydrotact.data import Rig, RigParameter, read_rig, write_log
+from hydrotact.sim import StageSession, simulate_stage_log
+from hydrotact.sim._stage import FINGERTIP_SENSOR
+from hydrotact.sysid import fit_problem, make_fit_problem
+from hydrotact.sysid._model import calc_residuals
+from hydrotact.visco import Prony
+
+MATERIAL = Prony(jnp.asarray(2e5), jnp.asarray([1e5]), jnp.asarray([2.0]))
+PROBE = "sphere:r=3mm"
+SHIFT = 0.3e-3  # the stage's x = 0 sits this far along the sensor's x: the rig must find it
+# Three presses 1 mm apart across the fingertip's crown (each touching at its own
+# height: the skin is curved), holds of 5-8 s, 16 Hz with 7-20 ms jitter, a 0.05 s
+# lag, 100-300 Pa of drift per channel.
+SESSION = StageSession(
+    sites=((-1e-3, 0.0), (0.0, 0.0), (1e-3, 0.0)), hold_range=(5.0, 8.0), rest_range=(1.0, 2.0), num_gaps=0, drift_range=(100.0, 300.0), seed=3,
+)
+
+
+@pytest.fixture(scope="module")
+def stand_in():
+    log, truth = simulate_stage_log(str(FINGERTIP_SENSOR), PROBE, MATERIAL, SESSION, num_rays=16)
+    log.metadata["sensor"] = str(FINGERTIP_SENSOR)
+    log.columns["stage_x"] = np.asarray(log.columns["stage_x"]) - SHIFT
+    home = float(truth["contact_z_m"].max()) + SESSION.clearance + truth["home_offset_m"]
+    rig = Rig(
+        probe=PROBE, columns={"travel": "indentation", "x": "stage_x", "y": "stage_y"},
+        offset_x=RigParameter(0.0, -0.6e-3, 0.6e-3), offset_y=RigParameter.at(0.0),
+        home=RigParameter(home + 0.1e-3, home - 0.4e-3, home + 0.4e-3), lag_s=RigParameter(0.02, 0.0, 0.15),
+        xy_step=0.2e-3, height_step=0.05e-3,
+    )
+    problem = make_fit_problem([log], rig=rig, drift=30.0, num_rays=16, sources=["stand-in"])
+    return log, truth, home, rig, problem
+
+
+def test_a_stage_log_gives_back_its_material_offset_home_and_lag(stand_in):
+    """The stand-in's truth within a few standard errors, or within what the table's
+    linear interpolation explains (0.05 mm in height: a few µm of home, a few ms
+    of lag, ~1.5 % of E), from starts 0.3 mm, 0.1 mm and 30 ms off."""
+    _, truth, home, _, problem = stand_in
+    result = fit_problem(problem, 1)
+    assert result.converged and result.reduced_chi_square < 1.5
+    rig = result.rig_parameters()
+    assert rig["offset_x"].value == pytest.approx(SHIFT, abs=10e-6)
+    assert rig["home[1]"].value == pytest.approx(home, abs=10e-6)
+    assert rig["lag_s"].value == pytest.approx(truth["lag_s"], abs=5e-3)
+    assert rig["offset_y"].std == 0.0 and rig["offset_y"].value == 0.0  # fixed
+    assert result.long_term_modulus.value == pytest.approx(2e5, rel=0.03)
+    (modulus, tau), = result.terms
+    assert modulus.value == pytest.approx(1e5, rel=0.05) and tau.value == pytest.approx(2.0, rel=0.03)
+    assert result.unidentified() == []
+    # the baselines drift: a spline per channel, the first sample's value reported
+    assert result.layout.drifts[0] > 1 and set(result.offsets()[0]) == {"f0", "f1", "f2", "f3"}
+
+
+def test_the_rig_parameters_gradients_match_finite_differences(stand_in):
+    """The residuals' derivatives in each fitted rig parameter (through the table's
+    interpolation and the lagged travel) against central differences, away from
+    the table's nodes (the start's offset puts every press on a node: the
+    interpolation has a kink there, and forward mode takes one side's slope; so
+    does the deepest hold, the table's lowest layer, at the start's home)."""
+    *_, problem = stand_in
+    from hydrotact.sysid._fit import make_initial_guess
+
+    layout, x0 = make_initial_guess(problem, 1)
+    x0[layout.names(problem).index("rig[offset_x]")] = np.arctanh(0.05 / 0.6)  # 0.05 mm: a quarter of a table step off the nodes
+    x0[layout.names(problem).index("rig[home[1]]")] = np.arctanh(0.1123 / 0.4)  # 12.3 um (a quarter step) above the start
+    x0 = jnp.asarray(x0)
+    fn = lambda x: calc_residuals(x, problem.without_infos(), layout)
+    jacobian = np.asarray(jax.jacfwd(fn)(x0))
+    for name in ("rig[offset_x]", "rig[home[1]]", "rig[lag_s]"):
+        k = layout.names(problem).index(name)
+        h = 1e-6
+        difference = (np.asarray(fn(x0.at[k].add(h))) - np.asarray(fn(x0.at[k].add(-h)))) / (2 * h)
+        scale = np.max(np.abs(difference))
+        assert scale > 1.0, name  # the parameter moves the readings
+        # piecewise linear in the table: a difference straddling a node differs there alone
+        close = np.abs(jacobian[:, k] - difference) <= 1e-4 * scale
+        assert close.mean() > 0.99, (name, close.mean())
+
+
+def test_the_command_line_fits_a_stage_log_with_a_rig_file(stand_in, tmp_path, capsys):
+    log, truth, home, _, _ = stand_in
+    path = tmp_path / "stage.parquet"
+    write_log(path, log)
+    rig = {
+        "format": "hydrotact.rig", "version": 1, "units": {"length": "mm"}, "probe": PROBE,
+        "offset_x": {"start": 0.0, "min": -0.6, "max": 0.6}, "home": {"start": 1e3 * home + 0.1, "min": 1e3 * home - 0.4, "max": 1e3 * home + 0.4},
+        "lag_s": {"start": 0.02, "min": 0.0, "max": 0.15}, "table_step": {"xy": 0.2, "height": 0.05},
+    }
+    (tmp_path / "rig.json").write_text(json.dumps(rig))
+    result = run_main(capsys, "fit", path, "--rig", tmp_path / "rig.json", "--terms", "1", "--rays", "16", "-o", tmp_path / "fit", "--json")
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert report["rig"]["offset_x"]["value"] == pytest.approx(SHIFT, abs=10e-6) and report["rig"]["offset_x"]["identified"]
+    assert report["rig"]["offset_y"] == {"value": 0.0, "std": 0.0, "identified": True, "fitted": False}
+    assert report["drift_columns"][0] > 1
+    assert (tmp_path / "fit" / "material.json").is_file()
+    # a lumped fit has no sensor to place the probe on
+    assert_one_line_error(run_main(capsys, "fit", path, "--rig", tmp_path / "rig.json", "--lumped", "-o", tmp_path / "f2"), "--rig", "--lumped")
+    assert not (tmp_path / "f2").exists()
+
+
+RIG = {"format": "hydrotact.rig", "version": 1, "units": {"length": "mm"}, "probe": PROBE, "home": {"start": 5.0, "min": 4.0, "max": 6.0}}
+
+
+@pytest.mark.parametrize(
+    "change, fragments",
+    [
+        ({"home": {"start": 5.0, "min": 6.0, "max": 4.0}}, ("home", "min", "below max")),
+        ({"home": {"start": 7.0, "min": 4.0, "max": 6.0}}, ("home", "start 7", "outside")),
+        ({"lag_s": {"start": 0.0, "min": -0.1, "max": 0.1}}, ("lag_s", "negative")),
+        ({"probe": "cone:r=1"}, ("probe",)),
+        ({"units": {"length": "inch"}}, ("units.length",)),
+        ({"home": {"value": 5.0, "start": 5.0}}, ("home",)),
+        ({"table_step": {"height": 1e-6}}, ("table_step.height",)),
+    ],
+)
+def test_a_bad_rig_file_is_one_line_naming_the_field(tmp_path, change, fragments):
+    path = tmp_path / "rig.json"
+    path.write_text(json.dumps({**RIG, **change}))
+    with pytest.raises(HydrotactError) as error:
+        read_rig(path)
+    message = str(error.value)
+    assert message.startswith(str(path)) and "\n" not in message
+    for fragment in fragments:
+        assert fragment in message, message
+
+
+def test_a_log_without_the_rigs_columns_is_refused_naming_it(tmp_path):
+    path = tmp_path / "rig.json"
+    path.write_text(json.dumps({**RIG, "columns": {"travel": "z"}}))
+    rig = read_rig(path)
+    assert rig.home == RigParameter(5e-3, 4e-3, 6e-3) and rig.offset_x.fixed and rig.lag_s == RigParameter.at(0.0)
+
+    class Log:
+        columns = {"indentation": np.zeros(3), "stage_x": np.zeros(3)}
+        num_samples = 3
+
+    with pytest.raises(HydrotactError, match=r"^a\.csv: the rig .* column 'z'"):
+        rig.stage_columns(Log(), "a.csv")
