@@ -30,21 +30,35 @@ into this repository: the committed results are the table and the figure.
    puts Sensor_2's and Sensor_3's peaks over their barometers (a first estimate, from
    these files; the full-mode fit will fit it with the rest).
 
+3. **The material, full mode** (`--stages fit`): the pocket model's sensor, a rig
+   (`hydrotact.data.Rig`: the 10 mm ball, the stage's x offset fitted within ±2 mm of
+   the profile's estimate, the home per log within the README's contact onsets
+   (1,600-2,000 steps without the vacuum, 2,050-2,450 with it, a little wider than
+   its 1,700-1,950 and 2,150-2,350), the lag within 0-0.2 s), each group of three
+   logs (with and without the vacuum) fitted whole and, leaving each log out, from
+   the other two (`hydrotact fit --rig` through `fit_logs`: 2 Prony terms, 30 s drift
+   knots, readings above 140.5 kPa masked), and each left-out log predicted
+   (`compare`, its tare its first 20 s: the README's fair comparison), each channel's
+   RMS against the lumped fit's on the same split (mtl_calibration.json, where it is
+   in --output).
+
 Outputs (in --output, default experiments/results/): `mtl_strip.json` (the sensor's
 alignment, the simulated profiles, the table), `mtl_strip.md` (the table of each
 channel's profile: where it peaks and how wide it is at half its peak, measured (each
 log's rises as a share of its largest, their median at each x) and by each model), `mtl_strip.png`
 (the profiles; the measured rises in kPa). No reading of the logs is written but
 these summaries and the figure. The work folder `mtl_strip.work/` keeps the
-sensor file; a finished profile is read back on a re-run.
+sensor file, the rig files and each case's fit and comparison; a finished case is
+read back on a re-run (a killed run resumes at the case it was in).
 
-Run: `.venv/bin/python experiments/mtl_strip.py --data PATH [--output DIR] [--depth 1.0]`.
+Run: `.venv/bin/python experiments/mtl_strip.py --data PATH [--output DIR] [--depth 1.0] [--stages profile,fit]`.
 """
 
 import argparse
 import json
 import re
 import sys
+import time
 import xml.etree.ElementTree as ElementTree
 from pathlib import Path
 
@@ -214,7 +228,9 @@ def main() -> None:
     parser.add_argument("--data", type=Path, required=True, help="a checkout of the strip's repository, or a folder with design/ and logs/ laid out like it")
     parser.add_argument("--output", type=Path, default=Path(__file__).parent / "results")
     parser.add_argument("--depth", type=float, default=1.0, help="the simulated ball's depth into the skin, mm")
+    parser.add_argument("--stages", default="profile,fit", help="profile (the barometers' spatial profiles), fit (the material, full mode, with held-out logs)")
     args = parser.parse_args()
+    stages = set(args.stages.split(","))
     sys.path.insert(0, str(Path(__file__).parent))
     from mtl_calibration import find_logs
 
@@ -267,6 +283,8 @@ def main() -> None:
         "profiles_Pa": {kind: values.tolist() for kind, values in profiles.items()},
         "table": rows,
     }
+    if "fit" in stages:
+        document["fit"] = fit_stage(work / f"{NAME}_sensor_pocket.json", logs, work, offset, args.output)
     args.output.mkdir(parents=True, exist_ok=True)
     write_text_atomic(args.output / f"{NAME}.json", json.dumps(document, indent=1) + "\n")
     lines = ["| channel | port x (mm) | measured: peak x (vertex) / width (mm) | " + " | ".join(f"{kind}: peak x / width (mm), min / max (Pa)" for kind in MODELS) + " |",
@@ -275,9 +293,110 @@ def main() -> None:
         cells = [f"{row[f'{kind}_peak_x_mm']:.1f} / {row[f'{kind}_width_mm']:.1f}, {row[f'{kind}_min_Pa']:.0f} / {row[f'{kind}_max_Pa']:.0f}" for kind in MODELS]
         shape = f"{row['measured_peak_x_mm']:.1f} ({row['measured_vertex_x_mm']:.1f}) / {row['measured_width_mm']:.1f}"
         lines.append(f"| {row['channel']} | {row['port_x_mm']:.1f} | {shape} | " + " | ".join(cells) + " |")
+    if "fit" in document:
+        lines += ["", *fit_table(document["fit"])]
     write_text_atomic(args.output / f"{NAME}.md", "\n".join(lines) + "\n")
     _plot(document, measured, args.output / f"{NAME}.png")
     print(f"wrote {args.output / NAME}.{{json,md,png}}")
+
+
+ONSET_STEPS = {"non-vacuum": (1600.0, 2000.0), "vacuum": (2050.0, 2450.0)}  # the README's contact onsets, a little wider
+STEPS_PER_M = 480e3  # the README: 480 steps per mm
+SATURATION_PA = 140.5e3  # the README: mask samples above ~140.5 kPa
+SCORED = ("Sensor_1", "Sensor_2", "Sensor_3")
+
+
+def make_rig_document(offset_mm: float, skin_top_mm: float, group: str) -> dict:
+    """The stage rig of a group of logs (mm): the 10 mm ball, x offset within ±2 mm of
+    `offset_mm`, the home (the tip's height at travel 0) where the README puts the
+    contact onsets above the skin's top, the lag within 0-0.2 s."""
+    low, high = (skin_top_mm + steps / STEPS_PER_M * 1e3 for steps in ONSET_STEPS[group])
+    return {
+        "format": "hydrotact.rig", "version": 1, "name": f"mtl-stage-{group}",
+        "description": "The MTL strip's stage: a 10 mm steel ball (assumed; not recorded with the logs), z travel towards the skin, x along the strip.",
+        "units": {"length": "mm"}, "probe": f"sphere:r={BALL_RADIUS_M * 1e3:g}mm", "columns": {"travel": "indentation", "x": "stage_x"},
+        "offset_x": {"start": offset_mm, "min": offset_mm - 2.0, "max": offset_mm + 2.0},
+        "home": {"start": 0.5 * (low + high), "min": low, "max": high},
+        "lag_s": {"start": 0.05, "min": 0.0, "max": 0.2},
+        "table_step": {"xy": 0.5, "height": 0.1},
+    }
+
+
+def fit_stage(spec_path: Path, logs: dict, work: Path, offset_mm: float, output: Path) -> dict:
+    """Each group's fit (whole, and each log left out and predicted); resumable: a
+    case whose fit and comparison are in `work` is read back."""
+    from mtl_calibration import GROUPS, MAPPING
+
+    from hydrotact.sim import make_sensor_model
+    from hydrotact.sysid import SimulatorFit, compare_fit, fit_logs
+
+    mapping = work / "mtl_mapping.json"
+    write_text_atomic(mapping, json.dumps(MAPPING, indent=1) + "\n")
+    top = float(np.max(np.asarray(make_sensor_model(spec_path).field.vertices)[:, 2])) * 1e3
+    lumped = _lumped_held_out(output)
+    cases = []
+    for group, names in GROUPS.items():
+        rig = work / f"{NAME}_rig_{group}.json"
+        write_text_atomic(rig, json.dumps(make_rig_document(offset_mm, top, group), indent=1) + "\n")
+        for left in (None, *names):
+            fitted = [n for n in names if n != left]
+            folder = work / (f"fit_{group}" + ("" if left is None else f"_without_{left}"))
+            method = SimulatorFit(sensor=str(spec_path), num_rays=16, progress=False, rig=rig, drift=30.0, saturation_pa=SATURATION_PA)
+            if not (folder / "fit" / "report.json").is_file():
+                start = time.perf_counter()
+                fit_logs([logs[n] for n in fitted], folder / "fit", method=method, terms=2, mapping=mapping)
+                (folder / "seconds.txt").write_text(f"{time.perf_counter() - start:.1f}\n")
+            report = json.loads((folder / "fit" / "report.json").read_text())
+            case = {
+                "group": group, "fitted": fitted, "compared": left, "fit_seconds": float((folder / "seconds.txt").read_text()) if (folder / "seconds.txt").is_file() else None,
+                "reduced_chi_square": report["reduced_chi_square"], "long_term_modulus_Pa": report["long_term_modulus_Pa"],
+                "prony_terms": report["prony_terms"], "rig": report["rig"],
+                "fit_rms_Pa": {entry["source"].split("/")[-1]: {c: v["rms"] for c, v in entry["columns"].items()} for entry in report["residuals"]},
+            }
+            if left is not None:
+                if not (folder / "compare" / "compare.json").is_file():
+                    compare_fit(folder / "fit", [logs[left]], folder / "compare", mapping=mapping, tare="first:20")
+                entry = json.loads((folder / "compare" / "compare.json").read_text())["logs"][0]
+                case["compare_rms_Pa"] = {c: entry["channels"][c]["rms_Pa"] for c in SCORED}
+                case["compare_pooled_rms_Pa"] = float(np.sqrt(np.mean([entry["channels"][c]["rms_Pa"] ** 2 for c in SCORED])))
+                case["home_shift_mm"] = 1e3 * entry["home_shift_m"]["value"] if entry["home_shift_m"] else None
+                case["lumped_compare_pooled_rms_Pa"] = lumped.get((group, left))
+            cases.append(case)
+            print(f"{group} {'whole' if left is None else 'without ' + left}: E_inf {report['long_term_modulus_Pa']['value'] / 1e6:.3f} MPa"
+                  + (f", held out {case['compare_pooled_rms_Pa']:.0f} Pa pooled RMS" if left else ""), flush=True)
+    return {"sensor": "pocket", "saturation_Pa": SATURATION_PA, "tare": "first:20", "cases": cases}
+
+
+def _lumped_held_out(output: Path) -> dict:
+    """{(group, left-out log): the lumped fit's pooled RMS on it} from mtl_calibration.json, if there."""
+    path = output / "mtl_calibration.json"
+    if not path.is_file():
+        return {}
+    found = {}
+    for case in json.loads(path.read_text())["cases"]:
+        if case["kind"] == "leave-one-out":
+            found[(case["case"].split(" without ")[0], case["compared"])] = case.get("compare_pooled_rms_Pa")
+    return found
+
+
+def fit_table(fit: dict) -> list:
+    """The fit stage's table lines (markdown)."""
+    lines = ["| group | fitted | E∞ (MPa) | slow term (MPa, s) | offset x (mm) | lag (ms) | held out | RMS Sensor_1-3 (Pa) | pooled (Pa) | lumped, same split (Pa) |",
+             "|---|---|---:|---|---:|---:|---|---|---:|---:|"]
+    for case in fit["cases"]:
+        modulus = case["long_term_modulus_Pa"]
+        slow = max(case["prony_terms"], key=lambda term: term["tau_s"]["value"])
+        rig = case["rig"]
+        held = case["compared"] or "-"
+        rms = ", ".join(f"{case['compare_rms_Pa'][c]:.0f}" for c in SCORED) if case["compared"] else "-"
+        pooled = f"{case['compare_pooled_rms_Pa']:.0f}" if case["compared"] else "-"
+        lumped = f"{case['lumped_compare_pooled_rms_Pa']:.0f}" if case.get("lumped_compare_pooled_rms_Pa") else "-"
+        lines.append(
+            f"| {case['group']} | {len(case['fitted'])} logs | {modulus['value'] / 1e6:.2f} ± {modulus['std'] / 1e6:.2f} | "
+            f"{slow['modulus_Pa']['value'] / 1e6:.2f}, {slow['tau_s']['value']:.3g} | {rig['offset_x']['value'] * 1e3:.2f} | {rig['lag_s']['value'] * 1e3:.0f} | "
+            f"{held} | {rms} | {pooled} | {lumped} |"
+        )
+    return lines
 
 
 def _plot(document: dict, measured: dict, path: Path) -> None:

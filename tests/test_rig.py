@@ -3,6 +3,7 @@ columns, the rig's offsets, home and lag fitted with the material on a drifting
 baseline (known truth, on the stand-in), the table's gradients against finite
 differences, the command line, and the rig file's errors."""
 
+import dataclasses
 import json
 
 import jax
@@ -152,3 +153,31 @@ def test_a_log_without_the_rigs_columns_is_refused_naming_it(tmp_path):
 
     with pytest.raises(HydrotactError, match=r"^a\.csv: the rig .* column 'z'"):
         rig.stage_columns(Log(), "a.csv")
+
+
+def test_compare_predicts_a_held_out_stage_log_from_a_rig_fit(stand_in, tmp_path, capsys):
+    """A second session of the same rig (another home, another drift, other holds)
+    predicted from the fit of the first: its home found within a few µm, each
+    channel's RMS within a few noise stds (the table's interpolation and the fit's
+    errors); the fit's own log comes back with the fit's residuals."""
+    log, truth, home, _, problem = stand_in
+    held_out, held_truth = simulate_stage_log(str(FINGERTIP_SENSOR), PROBE, MATERIAL, dataclasses.replace(SESSION, seed=11, hold_range=(8.0, 10.0)), num_rays=16)
+    held_out.metadata["sensor"] = str(FINGERTIP_SENSOR)
+    held_out.columns["stage_x"] = np.asarray(held_out.columns["stage_x"]) - SHIFT
+    write_log(tmp_path / "fitted.parquet", log)
+    write_log(tmp_path / "held_out.parquet", held_out)
+    result = fit_problem(problem, 1)
+    from hydrotact.sysid import write_fit_outputs
+
+    write_fit_outputs(result, tmp_path / "fit", paths=[str(tmp_path / "fitted.parquet")])
+    assert (tmp_path / "fit" / "rig_table.npz").is_file()
+    run = run_main(capsys, "compare", tmp_path / "fit", tmp_path / "held_out.parquet", "-o", tmp_path / "compare", "--json")
+    assert run.returncode == 0, run.stderr
+    entry = json.loads(run.stdout)["logs"][0]
+    held_home = float(held_truth["contact_z_m"].max()) + SESSION.clearance + held_truth["home_offset_m"]
+    fitted_home = result.rig_parameters()["home[1]"].value
+    assert entry["home_shift_m"]["value"] == pytest.approx(held_home - fitted_home, abs=10e-6)
+    for name, numbers in entry["channels"].items():
+        assert numbers["rms_Pa"] < 2.0 * numbers["noise_Pa"], (name, numbers)  # 1.01-1.21 x noise
+        assert numbers["r2"] > 0.99
+    assert (tmp_path / "compare" / "held_out_predicted.parquet").is_file()

@@ -1,13 +1,17 @@
-"""`hydrotact compare`: predict held-out stage logs from a lumped fit (everything but
-each log's baseline fixed) and report how close the prediction comes."""
+"""`hydrotact compare`: predict held-out stage logs from a lumped fit or a full-mode
+fit through a rig (everything but each log's baseline and home fixed) and report how
+close the prediction comes."""
 
 import json
 from pathlib import Path
 
 
 def add_parser(subparsers):
-    parser = subparsers.add_parser("compare", help="predict held-out logs from a lumped fit and compare (RMS, R², hold shape)")
-    parser.add_argument("fit_dir", type=Path, metavar="FITDIR", help="the folder `hydrotact fit --lumped` wrote (its material.json carries the channel law)")
+    parser = subparsers.add_parser("compare", help="predict held-out logs from a lumped or rig fit and compare (RMS, R², hold shape)")
+    parser.add_argument(
+        "fit_dir", type=Path, metavar="FITDIR",
+        help="the folder `hydrotact fit --lumped` (its material.json carries the channel law) or `hydrotact fit --rig` (its rig_table.npz) wrote",
+    )
     parser.add_argument("logs", nargs="+", type=Path, metavar="LOG", help="stage logs of the same sensor and stage (.parquet, or .csv with its .json or a --mapping)")
     parser.add_argument("--mapping", type=Path, metavar="MAP.json", help="column mapping for logs of your own layout")
     parser.add_argument(
@@ -19,7 +23,8 @@ def add_parser(subparsers):
     )
     parser.add_argument(
         "--home", default="estimate", choices=("estimate", "fit"),
-        help="the stage's home (the travel column's zero) differs between sessions: fit one shift of every onset to each log (default), or use the fit's onsets as they are",
+        help="the stage's home (the travel column's zero) differs between sessions: fit it to each log (default: one shift of every onset, or a rig fit's home), "
+        "or use the fit's (its onsets; a rig fit's home for its own logs, else their mean)",
     )
     parser.add_argument("-o", "--output", required=True, type=Path, metavar="DIR", help="folder for compare.json, the predicted logs and plots")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
@@ -36,7 +41,7 @@ def run(args) -> None:
         return
     for entry in report["logs"]:
         home = entry["home_shift_m"]
-        shift = "" if home is None else f" (onsets shifted {home['value'] * 1e3:+.4f} ± {home['std'] * 1e3:.4f} mm: its home)"
+        shift = "" if home is None else f" (home shifted {home['value'] * 1e3:+.4f} ± {home['std'] * 1e3:.4f} mm from the fit's: its home)"
         print(f"{entry['source']}:{shift}")
         for name, c in entry["channels"].items():
             print(

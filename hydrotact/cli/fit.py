@@ -49,7 +49,7 @@ def add_parser(subparsers):
     parser.add_argument("--estimate-lag", action="store_true", help="--lumped: fit the lag per log (within ±0.5 s)")
     parser.add_argument(
         "--saturation", type=number, metavar="PA",
-        help="--lumped: readings at or above this are clipped and masked (default: the part's upper limit for absolute logs of a known sensor; flat maxima always)",
+        help="readings at or above this are clipped and masked (default: the part's upper limit for absolute logs of a known sensor; --lumped: flat maxima always)",
     )
     parser.add_argument(
         "--press-threshold", type=number, default=0.05, metavar="F",
@@ -88,7 +88,7 @@ def run(args) -> None:
             threshold=args.press_threshold, starts=parse_starts(args.starts),
         )
     else:
-        method = SimulatorFit(sensor=args.sensor, field=args.field, num_rays=args.rays, progress=not args.json, rig=args.rig, drift=drift)
+        method = SimulatorFit(sensor=args.sensor, field=args.field, num_rays=args.rays, progress=not args.json, rig=args.rig, drift=drift, saturation_pa=args.saturation)
     report = fit_logs(
         args.logs, args.output, method=method, mapping=args.mapping, terms=args.terms, solver=args.solver, tare=args.tare,
         plot=plot_press_fit if args.lumped else plot_fit, max_steps=args.max_steps,

@@ -22,6 +22,7 @@ from ._report import (
     make_report as make_report,
     write_fit_outputs as write_fit_outputs,
 )
+from ._rig_compare import compare_fit as compare_fit, compare_rig_log as compare_rig_log
 from ._solve import (
     SOLVERS as SOLVERS,
     BoundedLBFGSB as BoundedLBFGSB,
@@ -37,7 +38,6 @@ from .lumped import (
     Parameter as Parameter,
     Presses as Presses,
     PressFit as PressFit,
-    compare_fit as compare_fit,
     compare_log as compare_log,
     find_log_presses as find_log_presses,
     find_presses as find_presses,

@@ -35,7 +35,10 @@ def calc_covariance(chi_square: float, normal: np.ndarray, num_residuals: int) -
     """The parameters' covariance s² (JᵀJ)⁺ from the normal matrix JᵀJ of residuals
     already divided by their noise, s² = χ² / (N − P) the reduced chi-square."""
     dof = max(1, num_residuals - normal.shape[0])
-    return float(chi_square) / dof * np.linalg.pinv(normal, rcond=1e-13, hermitian=True)
+    inverse = np.linalg.pinv(normal, rcond=1e-13, hermitian=True)
+    # symmetric to round-off only: with hundreds of parameters (a rig fit's drift
+    # splines) the pseudo-inverse of an ill-conditioned JᵀJ is 1e-9 off symmetry
+    return float(chi_square) / dof * 0.5 * (inverse + inverse.T)
 
 
 def calc_bic(chi_square: float, num_residuals: int, num_parameters: int) -> float:

@@ -12,6 +12,7 @@ import math
 import warnings
 from pathlib import Path
 
+import jax
 import numpy as np
 
 from .._errors import HydrotactError, warn
@@ -102,7 +103,8 @@ class SimulatorFit:
     For stage logs, which have no probe pose, a `rig` (a :class:`hydrotact.data.Rig`
     or its file) places the probe from the stage's columns and fits its offsets,
     home and lag; `drift` is each channel's baseline per log ("none": a constant
-    offset, "linear", or a spline knot spacing in s)."""
+    offset, "linear", or a spline knot spacing in s); readings at or above
+    `saturation_pa` are masked as clipped (besides the part's range limits)."""
 
     sensor: str | None = None
     field: str | None = None
@@ -110,6 +112,7 @@ class SimulatorFit:
     progress: bool = True
     rig: object = None
     drift: object = "none"
+    saturation_pa: float | None = None
 
 
 def fit_logs(paths, output, *, method=None, terms="auto", solver=None, tare=False, mapping=None, plot=None, max_steps=None) -> dict:
@@ -143,62 +146,63 @@ def fit_logs(paths, output, *, method=None, terms="auto", solver=None, tare=Fals
     terms = parse_terms(terms)
     if isinstance(method, LumpedFit):  # the solver as given: a named one steps with the press model's settings
         return _fit_press_files(paths, output, method, mapping, terms, given, tare, plot, max_steps)
-    sensor, field, num_rays, progress = method.sensor, method.field, method.num_rays, method.progress
-    rig = read_rig(method.rig) if isinstance(method.rig, (str, Path)) else method.rig
-    drift = parse_drift(method.drift)
-    logs = read_logs([Path(p) for p in paths], mapping, sensor)
-    for log, path in zip(logs, paths):  # every log checked before the first is simulated
-        if rig is None:
-            check_pose_columns(log, str(path))
-        else:
-            rig.stage_columns(log, str(path))
-        if sensor_spec(log.metadata["sensor"], str(path)) is None:
-            raise HydrotactError(
-                f"{path}: sensor: {log.metadata['sensor']!r} is neither a built-in sensor nor a sensor JSON file here: a full fit simulates the sensor "
-                "(name an existing spec in the log's metadata, relative to this folder), or fit --lumped"
-            )
-        if rig is None:
-            log_probe(log, str(path))
-    sensors = list(dict.fromkeys(log.metadata["sensor"] for log in logs))
-    if len(sensors) > 1:  # each sensor keeps its own gains; the material is one
-        warn(
-            f"the logs come from {len(sensors)} sensors ({', '.join(sensors)}): one material is fitted to all of them, right only if they are cast "
-            "from the same elastomer (fit each sensor on its own otherwise)"
-        )
-    if tare:
-        logs = [tare_log(log, source=str(path))[0] for log, path in zip(logs, paths)]
-    for log, path in zip(logs, paths):
-        clipped = find_clipped_readings(log, log.channels).sum(axis=0)
-        if clipped.any():
-            names = [name for name, n in zip(log.metadata["channels"], clipped) if n]
+    with jax.enable_x64(True):  # absolute readings (~1e5 Pa) to a Pa, and normal equations: float64 whatever the caller's precision
+        sensor, field, num_rays, progress = method.sensor, method.field, method.num_rays, method.progress
+        rig = read_rig(method.rig) if isinstance(method.rig, (str, Path)) else method.rig
+        drift = parse_drift(method.drift)
+        logs = read_logs([Path(p) for p in paths], mapping, sensor)
+        for log, path in zip(logs, paths):  # every log checked before the first is simulated
+            if rig is None:
+                check_pose_columns(log, str(path))
+            else:
+                rig.stage_columns(log, str(path))
+            if sensor_spec(log.metadata["sensor"], str(path)) is None:
+                raise HydrotactError(
+                    f"{path}: sensor: {log.metadata['sensor']!r} is neither a built-in sensor nor a sensor JSON file here: a full fit simulates the sensor "
+                    "(name an existing spec in the log's metadata, relative to this folder), or fit --lumped"
+                )
+            if rig is None:
+                log_probe(log, str(path))
+        sensors = list(dict.fromkeys(log.metadata["sensor"] for log in logs))
+        if len(sensors) > 1:  # each sensor keeps its own gains; the material is one
             warn(
-                f"{path}: {int(clipped.sum())} readings on {len(names)} channels ({', '.join(names[:4])}{', ...' if len(names) > 4 else ''}) sit at the "
-                "part's range limits (the barometer clipped them): masked, not fitted"
+                f"the logs come from {len(sensors)} sensors ({', '.join(sensors)}): one material is fitted to all of them, right only if they are cast "
+                "from the same elastomer (fit each sensor on its own otherwise)"
             )
-    problem = make_fit_problem(logs, field=field, num_rays=num_rays, sources=[str(p) for p in paths], progress=progress, rig=rig, drift=drift)
-    counts = list(range(MAX_AUTO_TERMS + 1)) if terms == "auto" else [terms]
-    with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} fits"), TimeElapsedColumn(), transient=True, disable=not progress) as bar:
-        task = bar.add_task(f"fitting ({name})", total=len(counts))
-        if terms == "auto":
-            result = fit_auto(problem, solver, progress=lambda k: bar.update(task, advance=1, description=f"fitting ({name}): {k} terms done"), max_steps=max_steps)
-        else:
-            result = fit_problem(problem, terms, solver, max_steps=max_steps)
-            bar.update(task, advance=1)
-    messages = []
-    if not result.converged:
-        messages.append(f"the {name} solver stopped before converging ({result.num_steps} steps; raise --max-steps); the numbers below are its last iterate")
-    if result.reduced_chi_square > CHI_SQUARE_WARNING:
-        messages.append(
-            f"reduced χ² {result.reduced_chi_square:.3g}: the model misses the data by {math.sqrt(result.reduced_chi_square):.2g} noise stds RMS; "
-            "are the sensor, the channel names and the units right? (see residuals.png)"
-        )
-    unidentified = result.unidentified()
-    if unidentified:
-        messages.append(f"not identified by these logs: {', '.join(unidentified)} (marked in the table and report.json; fewer --terms, or longer logs)")
-    for message in messages:
-        warn(message)
-    report = write_fit_outputs(result, output, paths=[str(p) for p in paths], plot=plot)
-    return report
+        if tare:
+            logs = [tare_log(log, source=str(path))[0] for log, path in zip(logs, paths)]
+        for log, path in zip(logs, paths):
+            clipped = find_clipped_readings(log, log.channels, method.saturation_pa).sum(axis=0)
+            if clipped.any():
+                names = [name for name, n in zip(log.metadata["channels"], clipped) if n]
+                warn(
+                    f"{path}: {int(clipped.sum())} readings on {len(names)} channels ({', '.join(names[:4])}{', ...' if len(names) > 4 else ''}) sit at the "
+                    "part's range limits (the barometer clipped them): masked, not fitted"
+                )
+        problem = make_fit_problem(logs, field=field, num_rays=num_rays, sources=[str(p) for p in paths], progress=progress, rig=rig, drift=drift, saturation_pa=method.saturation_pa)
+        counts = list(range(MAX_AUTO_TERMS + 1)) if terms == "auto" else [terms]
+        with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} fits"), TimeElapsedColumn(), transient=True, disable=not progress) as bar:
+            task = bar.add_task(f"fitting ({name})", total=len(counts))
+            if terms == "auto":
+                result = fit_auto(problem, solver, progress=lambda k: bar.update(task, advance=1, description=f"fitting ({name}): {k} terms done"), max_steps=max_steps)
+            else:
+                result = fit_problem(problem, terms, solver, max_steps=max_steps)
+                bar.update(task, advance=1)
+        messages = []
+        if not result.converged:
+            messages.append(f"the {name} solver stopped before converging ({result.num_steps} steps; raise --max-steps); the numbers below are its last iterate")
+        if result.reduced_chi_square > CHI_SQUARE_WARNING:
+            messages.append(
+                f"reduced χ² {result.reduced_chi_square:.3g}: the model misses the data by {math.sqrt(result.reduced_chi_square):.2g} noise stds RMS; "
+                "are the sensor, the channel names and the units right? (see residuals.png)"
+            )
+        unidentified = result.unidentified()
+        if unidentified:
+            messages.append(f"not identified by these logs: {', '.join(unidentified)} (marked in the table and report.json; fewer --terms, or longer logs)")
+        for message in messages:
+            warn(message)
+        report = write_fit_outputs(result, output, paths=[str(p) for p in paths], plot=plot)
+        return report
 
 
 def _fit_press_files(paths, output, method, mapping, terms, solver, tare, plot, max_steps) -> dict:

@@ -41,11 +41,15 @@ ROTATION_COLUMNS = ("probe_rx", "probe_ry", "probe_rz")
 _SILENT_FRACTION = 1e-3
 
 
-def find_clipped_readings(log, channels) -> np.ndarray:
+def find_clipped_readings(log, channels, saturation_pa=None) -> np.ndarray:
     """(T, C) readings of an absolute log at or beyond its part's range (the part
-    clips there: the pressure behind the reading is unknown), for a known sensor."""
+    clips there: the pressure behind the reading is unknown), for a known sensor;
+    with `saturation_pa`, also those at or above it (a part that clips below its
+    rated limit)."""
     from ..data import sensor_spec
 
+    if saturation_pa is not None:
+        return (np.asarray(channels) >= float(saturation_pa)) | find_clipped_readings(log, channels)
     spec = sensor_spec(log.metadata.get("sensor", ""))
     if spec is None or log.metadata.get("pressure") != "absolute":
         return np.zeros(np.shape(channels), dtype=bool)
@@ -191,7 +195,7 @@ def _channel_values(log) -> np.ndarray:
 
 def make_fit_problem(
     logs, *, field: str | None = None, num_rays: int | None = None, use_forces: bool = True,
-    unit_responses=None, sources=None, progress: bool = False, rig=None, drift="none",
+    unit_responses=None, sources=None, progress: bool = False, rig=None, drift="none", saturation_pa=None,
 ) -> FitProblem:
     """Build a FitProblem from BarometerLogs (host).
 
@@ -213,6 +217,8 @@ def make_fit_problem(
       sensor; the rig names the probe).
     - `drift`: each channel's baseline per log: "none" (a constant offset),
       "linear", or a knot spacing in s (cubic B-splines: a drifting barometer).
+    - `saturation_pa`: readings at or above this are clipped too (masked), besides
+      those at the part's range limits.
     """
     if not logs:
         raise HydrotactError("no logs to fit")
@@ -230,7 +236,7 @@ def make_fit_problem(
         log_rays = logs[0].metadata.get("num_rays", 64) if num_rays is None else num_rays
         model = _log_model(logs[0], sources[0], log_field, log_rays)
         every = [np.arange(len(log.metadata["channels"]) + 3) for log in logs]
-        rig_arrays, rig_starts = make_rig_arrays(rig, model, parse_probe(rig.probe), logs, sources, every, progress=progress)
+        rig_arrays, rig_starts = make_rig_arrays(rig, model, parse_probe(rig.probe), logs, sources, every, progress=progress, drift=drift, saturation_pa=saturation_pa)
     prepared, infos, gain_names, columns = [], [], [], []
     for k, (log, source) in enumerate(zip(logs, sources)):
         if log.num_samples < 8:
@@ -262,7 +268,7 @@ def make_fit_problem(
             columns.append(list(range(len(channels))))
         num_channels = len(channels)
         clipped = np.zeros(observed.shape, dtype=bool)
-        clipped[:, :num_channels] = find_clipped_readings(log, observed[:, :num_channels])
+        clipped[:, :num_channels] = find_clipped_readings(log, observed[:, :num_channels], saturation_pa)
         noise = estimate_noise(observed)
         gain_index = np.full(num_channels, -1)
         if force_columns:

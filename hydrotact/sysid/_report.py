@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from .._files import write_text_atomic
+from .._files import atomic_path, write_text_atomic
 from ..data import make_material_document, write_material
 from ._fit import FitResult
 
@@ -109,6 +109,8 @@ def make_report(result: FitResult) -> dict:
             for name, estimate in result.rig_parameters().items()
         }
         report["drift_columns"] = list(result.layout.drifts)
+        report["rig_setup"] = result.problem.rig.setup_document()
+        report["logs"] = [{"source": info.source, "sha256": info.sha256, "sensor": info.sensor} for info in result.problem.infos]
     if result.criteria:
         report["criterion"] = {"name": "bic", "by_num_terms": {str(k): v for k, v in result.criteria.items()}}
     return report
@@ -142,7 +144,14 @@ def write_fit_outputs(result: FitResult, out_dir, paths=(), plot=None) -> dict:
     `hydrotact.viz.plot_fit` for traces.png, residuals.png and relaxation.png. The
     stage draws nothing itself (no stage imports `hydrotact.viz`). Returns the report,
     with `files` naming everything written."""
-    return write_outputs(result, out_dir, make_fit_material(result, paths), make_report(result), plot)
+    files = {}
+    if result.problem.rig is not None:  # what `compare` reads the held-out logs' responses off
+        table = result.problem.rig.table
+        files["rig_table"] = str(Path(out_dir) / "rig_table.npz")
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+        with atomic_path(files["rig_table"]) as tmp:
+            np.savez(tmp, origin=np.asarray(table.origin), step=np.asarray(table.step), values=np.asarray(table.values))
+    return write_outputs(result, out_dir, make_fit_material(result, paths), make_report(result), plot, files=files)
 
 
 def write_outputs(result, out_dir, material: dict, report: dict, plot=None, files=None) -> dict:

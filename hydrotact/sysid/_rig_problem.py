@@ -34,6 +34,12 @@ class RigArrays(eqx.Module):
     centre: Float[Array, " num_rig"]
     half: Float[Array, " num_rig"]
     names: tuple[str, ...] = eqx.field(static=True)
+    setup: tuple = eqx.field(static=True, default=())  # (key, value) pairs: what a comparison needs to place the probe again
+
+    def setup_document(self) -> dict:
+        """The rig as the fit used it (SI; bounds per parameter): report.json's
+        `rig_setup`, which `compare` reads back."""
+        return {key: (dict(value) if isinstance(value, tuple) else value) for key, value in self.setup}
 
     @property
     def free(self) -> tuple[int, ...]:
@@ -69,7 +75,7 @@ def rig_log_inputs(rig: RigArrays, values, log: int, times):
     return calc_rig_inputs(rig.table, rig.stage_xy[log] + offset[None, :], home - travel, rig.columns[log])
 
 
-def make_rig_arrays(rig, model, probe, logs, sources, columns, progress: bool = False) -> tuple[RigArrays, np.ndarray]:
+def make_rig_arrays(rig, model, probe, logs, sources, columns, progress: bool = False, drift="none", saturation_pa=None) -> tuple[RigArrays, np.ndarray]:
     """The RigArrays of `logs` (host; `columns` per log the table columns each reads)
     and every rig parameter's start (P,): builds the response table over the
     stages' sites moved by the offsets' bounds and the heights the homes' bounds
@@ -107,5 +113,10 @@ def make_rig_arrays(rig, model, probe, logs, sources, columns, progress: bool = 
         centre=jnp.asarray(centre),
         half=jnp.asarray(half),
         names=rig_parameter_names(len(logs)),
+        setup=(
+            ("name", rig.name), ("probe", rig.probe), ("columns", tuple(sorted(rig.columns.items()))), ("drift", drift), ("saturation_pa", saturation_pa),
+            ("bounds", tuple((name, (p.low, p.high)) for name, p in (("offset_x", rig.offset_x), ("offset_y", rig.offset_y), ("home", rig.home), ("lag_s", rig.lag_s)))),
+            ("table_step", (("xy", rig.xy_step), ("height", rig.height_step))),
+        ),
     )
     return arrays, np.asarray([p.start for p in parameters])

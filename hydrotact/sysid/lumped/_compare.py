@@ -41,9 +41,7 @@ For a log the fit used (the same SHA-256), the fit's own onsets and lag for that
 (from its report.json) replace the per-site means, and no home shift is fitted.
 """
 
-import dataclasses
 import json
-import warnings
 from pathlib import Path
 
 import jax
@@ -52,7 +50,7 @@ import numpy as np
 
 from ..._errors import HydrotactError, warn
 from ...data import estimate_noise, read_material
-from ..shared import file_digest
+from ..shared import Comparison, file_digest, parse_tare as parse_tare, summarise_comparison, tare_baseline, write_comparisons
 from ._lumped import ONSET_HALF_RANGE
 from ._prediction import _estimate_home, _make_law_model, _parameter_variance, _predict, _tare_variance
 from ._press_data import DRIFT_KNOT_S, drift_basis, find_clipped, find_kinks, upper_limit
@@ -66,70 +64,6 @@ BAND_NOTE = (
     "1 sigma, first order in the fit's parameters, the home shift and the tare: a lower bound where a site's onset trades "
     "against its law (on the test stand-in, single presses' errors reach 3-5 band sigmas)"
 )
-
-
-@dataclasses.dataclass(frozen=True)
-class Comparison:
-    """One held-out log against a fit's prediction: `source`, `channels`, `times`
-    (s), `observed`, `predicted` (T, C) Pa (the tare included), `mask` (T, C) True
-    where compared, `hold` (T,) the press held at each sample (-1 elsewhere), and
-    per channel `rms_pa`, `r2`, `hold_shape_rms_pa` (the residual during holds less
-    each hold's mean: how well the relaxation's shape is predicted), `noise_pa`;
-    `predicted_std` (T, C) the prediction's standard deviation, Pa (NaN without the
-    fit's covariance), per channel `prediction_std_pa` (its RMS over the compared
-    samples) and `normalized_rms` (the error over √(noise² + band²)); `home_shift_m`
-    and `home_shift_std_m` the fitted shift of the log's onsets (None where not
-    fitted)."""
-
-    source: str
-    channels: tuple
-    times: np.ndarray
-    observed: np.ndarray
-    predicted: np.ndarray
-    mask: np.ndarray
-    hold: np.ndarray
-    rms_pa: np.ndarray
-    r2: np.ndarray
-    hold_shape_rms_pa: np.ndarray
-    noise_pa: np.ndarray
-    predicted_std: np.ndarray
-    prediction_std_pa: np.ndarray
-    normalized_rms: np.ndarray
-    home_shift_m: float | None = None
-    home_shift_std_m: float | None = None
-
-    def to_json(self) -> dict:
-        home = None if self.home_shift_m is None else {"value": self.home_shift_m, "std": self.home_shift_std_m}
-        return {
-            "source": self.source,
-            "home_shift_m": home,
-            "channels": {
-                name: {
-                    "rms_Pa": _number(self.rms_pa[c]), "r2": _number(self.r2[c]), "hold_shape_rms_Pa": _number(self.hold_shape_rms_pa[c]), "noise_Pa": _number(self.noise_pa[c]),
-                    "prediction_std_Pa": _number(self.prediction_std_pa[c]), "normalized_rms": _number(self.normalized_rms[c]),
-                }
-                for c, name in enumerate(self.channels)
-            },
-        }
-
-
-def _number(value):
-    """A float for JSON, None where there is no number (a channel masked throughout)."""
-    return float(value) if np.isfinite(value) else None
-
-
-def parse_tare(text):
-    """'no-load', 'all' or 'first:N' (N seconds > 0)."""
-    if text in ("no-load", "all"):
-        return text
-    if isinstance(text, str) and text.startswith("first:"):
-        try:
-            seconds = float(text[len("first:") :])
-        except ValueError:
-            seconds = float("nan")
-        if seconds > 0:
-            return ("first", seconds)
-    raise HydrotactError(f"--tare: expected no-load, all or first:SECONDS, got {text!r}")
 
 
 def read_fit(fit_dir):
@@ -253,22 +187,7 @@ def _compare_log(document, report, log, source, *, tare, home, covariance, drift
         if abs(shift) > 0.99 * ONSET_HALF_RANGE:
             warn(f"{source}: its home shift is at its bound (±{ONSET_HALF_RANGE * 1e3:g} mm of the fit's onsets): is it a log of this sensor and stage?")
     elastic, bases, touching, by_q, by_shift = (np.asarray(a) for a in _predict(model, amplitudes, jnp.asarray(shift)))
-    if isinstance(tare, tuple):
-        first = times - times[0] <= tare[1]
-        if first.sum() < 1:
-            raise HydrotactError(f"{source}: no samples in the first {tare[1]:g} s to tare on")
-        used = mask & first[:, None] & (elastic == 0.0)  # its no-load samples there
-        for c in np.flatnonzero(~used.any(axis=0)):
-            raise HydrotactError(
-                f"{source}: channel {channels[c]!r} has no unloaded, unmasked sample in the log's first {tare[1]:g} s to tare on "
-                f"(--tare first:{tare[1]:g}): take more seconds, or --tare no-load"
-            )
-        baseline = np.broadcast_to((np.sum(np.where(used, observed, 0.0), axis=0) / used.sum(axis=0))[None, :], observed.shape)
-        tare_basis = np.ones((len(times), 1))
-    else:
-        used = mask if tare == "all" else mask & (elastic == 0.0)
-        baseline = basis @ _solve_baseline(basis, observed, elastic, used)
-        tare_basis = basis
+    baseline, used, tare_basis = tare_baseline(tare, times, observed, elastic, mask, basis, source, channels, _solve_baseline)
     predicted = baseline + elastic
     for c, name in enumerate(channels):
         bad = mask[:, c] & ~np.isfinite(predicted[:, c])
@@ -286,24 +205,9 @@ def _compare_log(document, report, log, source, *, tare, home, covariance, drift
         deepest = travel[start:end].max()
         hold[start:end][travel[start:end] >= deepest - HOLD_TOLERANCE] = p
     predicted_std = np.sqrt(band) if covariance is not None else np.full(observed.shape, np.nan)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # a channel clipped through a whole hold: NaN there, None in JSON
-        error = np.where(mask, observed - predicted, np.nan)
-        rms = np.sqrt(np.nanmean(error**2, axis=0))
-        spread = np.nansum((np.where(mask, observed, np.nan) - np.nanmean(np.where(mask, observed, np.nan), axis=0)) ** 2, axis=0)
-        r2 = np.where(mask.any(axis=0), 1.0 - np.nansum(error**2, axis=0) / np.maximum(spread, 1e-300), np.nan)  # nothing compared: n/a, not 1
-        shaped = np.full(error.shape, np.nan)
-        for p in range(kept.num_presses):
-            rows = hold == p
-            if rows.sum() > 1:
-                shaped[rows] = error[rows] - np.nanmean(error[rows], axis=0)
-        hold_shape = np.sqrt(np.nanmean(shaped**2, axis=0))
-        prediction_std = np.sqrt(np.nanmean(np.where(mask, predicted_std**2, np.nan), axis=0))
-        normalized = np.sqrt(np.nanmean(error**2 / (noise**2 + np.where(np.isfinite(predicted_std), predicted_std, 0.0) ** 2), axis=0))
-    return Comparison(
-        source=source, channels=channels, times=times, observed=observed, predicted=predicted, mask=mask, hold=hold, rms_pa=rms, r2=r2,
-        hold_shape_rms_pa=hold_shape, noise_pa=noise, predicted_std=predicted_std, prediction_std_pa=prediction_std, normalized_rms=normalized,
-        home_shift_m=float(shift) if estimated else None, home_shift_std_m=float(np.sqrt(shift_var)) if estimated else None,
+    return summarise_comparison(
+        source, channels, times, observed, predicted, mask, hold, noise, predicted_std,
+        home_shift=(float(shift), float(np.sqrt(shift_var))) if estimated else None,
     )
 
 
@@ -316,11 +220,8 @@ def compare_fit(fit_dir, paths, output, *, mapping=None, tare="no-load", home="e
     `<channel>_compared`), and with `plot(comparisons,
     output) -> {name: path}` pictures. Everything is read and checked before
     anything is written. Returns the report (with `files`)."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
 
-    from ... import __version__
-    from ..._files import atomic_path, check_output, write_text_atomic
+    from ..._files import check_output
     from ..shared import read_logs
 
     output = check_output(output, directory=True, what="the comparison")
@@ -334,24 +235,5 @@ def compare_fit(fit_dir, paths, output, *, mapping=None, tare="no-load", home="e
     drift = (report or {}).get("drift")
     with jax.enable_x64(True):
         comparisons = [compare_log(document, report, log, str(path), tare=tare, home=home, covariance=covariance, drift=drift) for log, path in zip(logs, paths)]
-    output.mkdir(parents=True, exist_ok=True)
-    files = {}
-    for comparison, path in zip(comparisons, paths):
-        columns = {"time": comparison.times}
-        for c, name in enumerate(comparison.channels):
-            columns[name] = comparison.observed[:, c]
-            columns[f"{name}_predicted"] = comparison.predicted[:, c]
-            columns[f"{name}_predicted_std"] = comparison.predicted_std[:, c]
-            columns[f"{name}_compared"] = comparison.mask[:, c].astype(np.int8)
-        target = output / f"{Path(path).stem}_predicted.parquet"
-        with atomic_path(target) as tmp:
-            pq.write_table(pa.table(columns), tmp)
-        files[f"{Path(path).stem}_predicted"] = str(target)
-    if plot is not None:
-        files.update(plot(comparisons, output))
-    result = {"generator": f"hydrotact {__version__}", "fit": str(fit_dir), "tare": tare if isinstance(tare, str) else f"first:{tare[1]:g}", "home": home,
-        "prediction_band": BAND_NOTE if covariance is not None else None, "logs": [c.to_json() for c in comparisons]}
-    files["report"] = str(output / "compare.json")
-    result["files"] = files
-    write_text_atomic(files["report"], json.dumps(result, indent=2) + "\n")
-    return result
+    header = {"fit": str(fit_dir), "tare": tare if isinstance(tare, str) else f"first:{tare[1]:g}", "home": home, "prediction_band": BAND_NOTE if covariance is not None else None}
+    return write_comparisons(comparisons, paths, output, header, plot)
