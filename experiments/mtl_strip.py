@@ -303,6 +303,7 @@ def main() -> None:
 ONSET_STEPS = {"non-vacuum": (1600.0, 2000.0), "vacuum": (2050.0, 2450.0)}  # the README's contact onsets, a little wider
 STEPS_PER_M = 480e3  # the README: 480 steps per mm
 SATURATION_PA = 140.5e3  # the README: mask samples above ~140.5 kPa
+MAX_TRAVEL_MM = 6.0  # the README: zd6 logs travel to 2880 steps
 SCORED = ("Sensor_1", "Sensor_2", "Sensor_3")
 
 
@@ -318,6 +319,7 @@ def make_rig_document(offset_mm: float, skin_top_mm: float, group: str) -> dict:
         "offset_x": {"start": offset_mm, "min": offset_mm - 2.0, "max": offset_mm + 2.0},
         "home": {"start": 0.5 * (low + high), "min": low, "max": high},
         "lag_s": {"start": 0.05, "min": 0.0, "max": 0.2},
+        "max_travel": MAX_TRAVEL_MM,  # a held-out log may press to the deepest travel of any (zd6: 2880 steps)
         "table_step": {"xy": 0.5, "height": 0.1},
     }
 

@@ -128,6 +128,7 @@ RIG = {"format": "hydrotact.rig", "version": 1, "units": {"length": "mm"}, "prob
         ({"units": {"length": "inch"}}, ("units.length",)),
         ({"home": {"value": 5.0, "start": 5.0}}, ("home",)),
         ({"table_step": {"height": 1e-6}}, ("table_step.height",)),
+        ({"max_travel": 0.0}, ("max_travel",)),
     ],
 )
 def test_a_bad_rig_file_is_one_line_naming_the_field(tmp_path, change, fragments):
@@ -141,11 +142,17 @@ def test_a_bad_rig_file_is_one_line_naming_the_field(tmp_path, change, fragments
         assert fragment in message, message
 
 
+def read_rig_default_travel(folder):
+    (folder / "plain.json").write_text(json.dumps(RIG))
+    return read_rig(folder / "plain.json").max_travel
+
+
 def test_a_log_without_the_rigs_columns_is_refused_naming_it(tmp_path):
     path = tmp_path / "rig.json"
-    path.write_text(json.dumps({**RIG, "columns": {"travel": "z"}}))
+    path.write_text(json.dumps({**RIG, "columns": {"travel": "z"}, "max_travel": 6.0}))
     rig = read_rig(path)
     assert rig.home == RigParameter(5e-3, 4e-3, 6e-3) and rig.offset_x.fixed and rig.lag_s == RigParameter.at(0.0)
+    assert rig.max_travel == pytest.approx(6e-3) and read_rig_default_travel(tmp_path) is None
 
     class Log:
         columns = {"indentation": np.zeros(3), "stage_x": np.zeros(3)}

@@ -46,7 +46,8 @@ class Rig:
     −z), the log's stage `columns` (travel, x, y), `offset_x`, `offset_y` (the
     sensor-frame position of the stage's origin), `home` (the tip's height at travel
     0, per log), `lag_s` (the pressures' lag behind the logged travel), and the
-    response table's steps `xy_step`, `height_step` (m)."""
+    response table's steps `xy_step`, `height_step` (m) and the deepest travel it
+    covers, `max_travel` (m; None: the fitted logs' deepest)."""
 
     probe: str
     columns: dict
@@ -56,6 +57,7 @@ class Rig:
     lag_s: RigParameter
     xy_step: float = DEFAULT_TABLE_STEP["xy"]
     height_step: float = DEFAULT_TABLE_STEP["height"]
+    max_travel: float | None = None
     name: str = "rig"
     source: str = "rig"
 
@@ -121,6 +123,7 @@ def read_rig(path) -> Rig:
         lag_s=lag,
         xy_step=steps.get("xy", DEFAULT_TABLE_STEP["xy"]),
         height_step=steps.get("height", DEFAULT_TABLE_STEP["height"]),
+        max_travel=scale * document["max_travel"] if "max_travel" in document else None,
         name=document.get("name", Path(path).stem),
         source=source,
     )
