@@ -388,6 +388,8 @@ def fit_table(fit: dict) -> list:
     for case in fit["cases"]:
         modulus = case["long_term_modulus_Pa"]
         slow = max(case["prony_terms"], key=lambda term: term["tau_s"]["value"])
+        identified = slow["modulus_Pa"]["identified"] and slow["tau_s"]["identified"]
+        slow_text = f"{slow['modulus_Pa']['value'] / 1e6:.2f}, {slow['tau_s']['value']:.3g}" if identified else "not identified"
         rig = case["rig"]
         held = case["compared"] or "-"
         rms = ", ".join(f"{case['compare_rms_Pa'][c]:.0f}" for c in SCORED) if case["compared"] else "-"
@@ -395,7 +397,7 @@ def fit_table(fit: dict) -> list:
         lumped = f"{case['lumped_compare_pooled_rms_Pa']:.0f}" if case.get("lumped_compare_pooled_rms_Pa") else "-"
         lines.append(
             f"| {case['group']} | {len(case['fitted'])} logs | {modulus['value'] / 1e6:.2f} ± {modulus['std'] / 1e6:.2f} | "
-            f"{slow['modulus_Pa']['value'] / 1e6:.2f}, {slow['tau_s']['value']:.3g} | {rig['offset_x']['value'] * 1e3:.2f} | {rig['lag_s']['value'] * 1e3:.0f} | "
+            f"{slow_text} | {rig['offset_x']['value'] * 1e3:.2f} | {rig['lag_s']['value'] * 1e3:.0f} | "
             f"{held} | {rms} | {pooled} | {lumped} |"
         )
     return lines
