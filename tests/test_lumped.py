@@ -271,12 +271,14 @@ def test_the_hand_jacobian_is_autodiffs_through_the_projection(drift_from):
     def plain(x):
         return jnp.concatenate([r.reshape(-1) for r in calc_press_residuals(*layout.unpack(x, starts, (0.0, 0.0)), datas)[0]])
 
-    value, jacobian = jax.jit(lambda x: calc_press_jacobian(layout, x, args))(x)
-    reference = jax.jit(jax.jacfwd(plain))(x)
+    # one program each: the hand Jacobian with the sensitivity, autodiff's, the amplitudes' derivatives
+    value, jacobian, *_, sensitivity = jax.jit(lambda x: calc_press_jacobian(layout, x, args, linear=True))(x)
+    plain_value, reference = jax.jit(lambda x: (plain(x), jax.jacfwd(plain)(x)))(x)
     amplitudes = jax.jit(lambda x: calc_press_residuals(*layout.unpack(x, starts, (0.0, 0.0)), datas)[2])
+    by_x = np.asarray(jax.jit(jax.jacfwd(amplitudes))(x))
     assert np.all(np.asarray(amplitudes(x))[0, 1] == 0.0) and np.all(np.asarray(amplitudes(x))[1, 1] != 0.0)
-    assert np.all(np.asarray(jax.jacfwd(amplitudes)(x))[0, 1] == 0.0)
-    np.testing.assert_allclose(np.asarray(value), np.asarray(jax.jit(plain)(x)), atol=1e-4)
+    assert np.all(by_x[0, 1] == 0.0)
+    np.testing.assert_allclose(np.asarray(value), np.asarray(plain_value), atol=1e-4)
     scale = np.abs(np.asarray(reference)).max(axis=0)
     assert np.all(scale > 0.0)
     np.testing.assert_array_less(np.abs(np.asarray(jacobian - reference)).max(axis=0), 1e-3 * scale)
@@ -288,8 +290,7 @@ def test_the_hand_jacobian_is_autodiffs_through_the_projection(drift_from):
     # forward mode through the projection), and their block of N⁻¹, which is the
     # covariance of amplitudes solved from readings with the weights' noise: Σ_t
     # (∂A/∂y_t)(∂A/∂y_t)ᵀ / w_t² (reverse mode in the readings).
-    sensitivity = jax.jit(lambda x: calc_press_jacobian(layout, x, args, linear=True)[-1])(x)
-    steps = np.moveaxis(np.asarray(jax.jacfwd(amplitudes)(x)), -1, 0).reshape(np.asarray(sensitivity.steps).shape)
+    steps = np.moveaxis(by_x, -1, 0).reshape(np.asarray(sensitivity.steps).shape)
     np.testing.assert_allclose(np.asarray(sensitivity.steps), steps, atol=1e-3 * np.abs(steps).max())
 
     def from_readings(observed):
