@@ -27,9 +27,11 @@ demo: $(VENV)/.installed
 # compiler crashed (SIGSEGV while compiling, after ~200 tests of JAX, VTK rendering and
 # Drake in one process; the same test passes alone). A test process keeps about one core
 # busy (XLA compiles on one thread), so TEST_JOBS files run at once (xargs -P); each
-# file's output is printed whole when it ends, longest files first (by their CPU time
-# in the last fresh-clone run, RESULTS.md) so the run ends together. pytest exits 5 when it collected no tests: that is a failure here, like any
-# non-zero status, and any failing file fails the run (and is named at the end).
+# file's output is printed whole when it ends, longest files first so the run ends
+# together (an order that also lets the notebooks reuse the programs the first files
+# compiled: notebooks first cost them 70 CPU-s more, 2026-12-06). pytest exits 5 when
+# it collected no tests: that is a failure here, like any non-zero status, and any
+# failing file fails the run (and is named at the end).
 # Each file's line gives the CPU time its processes used (the shell's `times`; a Ray
 # cluster's daemons are not its children and are not counted): beside another file,
 # wall time says little about a file's own cost.
@@ -38,8 +40,7 @@ demo: $(VENV)/.installed
 # same programs, and one hydrotact cache (meshes, elastic fields, unit responses).
 TEST_JOBS ?= 2
 TEST_LOGS := .pytest-logs
-TEST_FIRST := tests/test_notebooks_and_experiments.py tests/test_contact.py tests/test_elastic.py tests/test_press_fit.py tests/test_taxel.py tests/test_datasets.py \
-	tests/test_lumped.py tests/test_forward_model.py tests/test_docs.py tests/test_design.py tests/test_contact_drake.py
+TEST_FIRST := tests/test_contact.py tests/test_datasets.py tests/test_taxel.py tests/test_forward_model.py tests/test_notebooks_and_experiments.py tests/test_press_fit.py
 TEST_FILES := $(TEST_FIRST) $(filter-out $(TEST_FIRST),$(sort $(wildcard tests/test_*.py)))
 
 test: $(VENV)/.installed-test
