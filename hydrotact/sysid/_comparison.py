@@ -12,6 +12,9 @@ import numpy as np
 
 from .._errors import HydrotactError
 
+HOLD_TOLERANCE = 1e-6  # m: a press holds where its travel is within this of its deepest
+HOMES = ("estimate", "fit")  # a held-out log's home: fitted to it, or the fit's
+
 
 @dataclasses.dataclass(frozen=True)
 class Comparison:

@@ -88,12 +88,12 @@ def make_layout(problem: FitProblem, num_terms: int) -> ParameterLayout:
     )
 
 
-def calc_inputs(x, problem: FitProblem, layout: ParameterLayout):
-    """Each log's unit responses (T, C + F) at x: the log's own, or, for stage logs,
-    read off the rig's table at x's rig parameters."""
+def calc_inputs(rig_u, problem: FitProblem, layout: ParameterLayout):
+    """Each log's unit responses (T, C + F): the log's own, or, for stage logs, read
+    off the rig's table at the fitted rig parameters' u (`layout.unpack(x)["rig"]`)."""
     if problem.rig is None:
         return tuple(log.inputs for log in problem.logs)
-    values = rig_values(problem.rig, layout.rig_free, layout.unpack(x)["rig"])
+    values = rig_values(problem.rig, layout.rig_free, rig_u)
     return tuple(rig_log_inputs(problem.rig, values, k, log.times) for k, log in enumerate(problem.logs))
 
 
@@ -104,7 +104,7 @@ def calc_predictions(x, problem: FitProblem, layout: ParameterLayout, method: st
     gains_all = jnp.concatenate([parameters["gains"], jnp.ones((1,), x.dtype)])
     predictions = []
     first = 0
-    for log, inputs, count, size in zip(problem.logs, calc_inputs(x, problem, layout), layout.channel_counts, layout.drifts):
+    for log, inputs, count, size in zip(problem.logs, calc_inputs(parameters["rig"], problem, layout), layout.channel_counts, layout.drifts):
         theta = parameters["offsets"][first : first + count * size].reshape(count, size)
         first += count * size
         baselines = log.offset_base[None, :] + log.offset_scale[None, :] * (log.drift @ theta.T)  # (T, C)

@@ -26,13 +26,13 @@ import numpy as np
 
 from .._errors import HydrotactError
 from ..data import estimate_noise, material_prony, read_material
-from ..sim import RigTable, calc_rig_inputs
+from ..sim import RigTable
 from ..visco import calc_contact_response
-from ._comparison import summarise_comparison, tare_baseline
+from ._comparison import HOLD_TOLERANCE, HOMES, summarise_comparison, tare_baseline
 from ._drift import drift_basis
 from ._problem import file_digest, find_clipped_readings
+from ._rig_problem import calc_stage_inputs
 
-HOLD_TOLERANCE = 1e-6  # m: a press holds where its travel is within this of its deepest
 UNNAMED = "unnamed"  # the sensor of a mapped log that names none (hydrotact.data.apply_mapping)
 
 
@@ -64,8 +64,7 @@ def read_rig_fit(fit_dir):
 @eqx.filter_jit
 def _elastic(prony, table, times, xy, travel, lag, home, gains):
     """(T, C) each channel's predicted elastomer reading (Pa, no baseline)."""
-    lagged = jnp.interp(times - lag, times, travel)
-    inputs = calc_rig_inputs(table, xy, home - lagged, jnp.arange(gains.shape[0]))
+    inputs = calc_stage_inputs(table, times, xy, travel, home, lag, jnp.arange(gains.shape[0]))
     return gains[None, :] * calc_contact_response(prony, times, inputs)
 
 
@@ -187,7 +186,6 @@ def compare_fit(fit_dir, paths, output, *, mapping=None, tare="no-load", home="e
     from ._comparison import parse_tare, write_comparisons
     from ._fit_logs import read_logs
     from .lumped import compare_fit as compare_lumped_fit
-    from .lumped._compare import HOMES
 
     if not is_rig_fit(fit_dir):
         return compare_lumped_fit(fit_dir, paths, output, mapping=mapping, tare=tare, home=home, plot=plot)

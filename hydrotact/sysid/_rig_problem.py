@@ -66,13 +66,20 @@ def rig_start(rig: RigArrays, free: tuple[int, ...], starts) -> np.ndarray:
     return np.arctanh(np.clip((np.asarray(starts)[index] - centre[index]) / half[index], -0.999, 0.999))
 
 
+def calc_stage_inputs(table: RigTable, times, tips_xy, travel, home, lag, columns):
+    """(T, K) unit responses of a stage log: the tips at `tips_xy` (T, 2) (the stage
+    moved by the offsets) and at `home` less the travel read `lag` s before each
+    sample (the pressures lag the logged travel), off the rig's `table`."""
+    lagged = jnp.interp(times - lag, times, travel)
+    return calc_rig_inputs(table, tips_xy, home - lagged, columns)
+
+
 def rig_log_inputs(rig: RigArrays, values, log: int, times):
     """(T, K) unit responses of log `log` at the rig parameters `values`."""
     num_logs = len(rig.travel)
     offset = values[:2]
     home, lag = values[2 + log], values[2 + num_logs]
-    travel = jnp.interp(times - lag, times, rig.travel[log])  # the travel lag s before each reading
-    return calc_rig_inputs(rig.table, rig.stage_xy[log] + offset[None, :], home - travel, rig.columns[log])
+    return calc_stage_inputs(rig.table, times, rig.stage_xy[log] + offset[None, :], rig.travel[log], home, lag, rig.columns[log])
 
 
 def make_rig_arrays(rig, model, probe, logs, sources, columns, progress: bool = False, drift="none", saturation_pa=None) -> tuple[RigArrays, np.ndarray]:

@@ -4,7 +4,15 @@ read logs, choose and run solvers, judge what the logs identify, warn on a poor 
 and write their outputs the same way. The lumped package imports these from here and
 nothing private from its parent."""
 
-from ._comparison import Comparison as Comparison, parse_tare as parse_tare, summarise_comparison as summarise_comparison, tare_baseline as tare_baseline, write_comparisons as write_comparisons
+from ._comparison import (
+    HOLD_TOLERANCE as HOLD_TOLERANCE,
+    HOMES as HOMES,
+    Comparison as Comparison,
+    parse_tare as parse_tare,
+    summarise_comparison as summarise_comparison,
+    tare_baseline as tare_baseline,
+    write_comparisons as write_comparisons,
+)
 from ._drift import drift_basis as drift_basis, parse_drift as parse_drift
 from ._fit import CHI_SQUARE_WARNING as CHI_SQUARE_WARNING, identify_time as identify_time
 from ._fit_logs import read_logs as read_logs

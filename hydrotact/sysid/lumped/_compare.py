@@ -50,7 +50,7 @@ import numpy as np
 
 from ..._errors import HydrotactError, warn
 from ...data import estimate_noise, read_material
-from ..shared import Comparison, file_digest, parse_tare as parse_tare, summarise_comparison, tare_baseline, write_comparisons
+from ..shared import HOLD_TOLERANCE, HOMES, Comparison, file_digest, parse_tare as parse_tare, summarise_comparison, tare_baseline, write_comparisons
 from ._lumped import ONSET_HALF_RANGE
 from ._prediction import _estimate_home, _make_law_model, _parameter_variance, _predict, _tare_variance
 from ._press_data import DRIFT_KNOT_S, drift_basis, find_clipped, find_kinks, upper_limit
@@ -58,8 +58,6 @@ from ._press_projection import solve_baselines
 from ._press_windows import POWERS, make_press_data
 from ._presses import SITE_TOLERANCE, find_log_presses
 
-HOLD_TOLERANCE = 1e-6  # m: a press holds where its travel is within this of its deepest
-HOMES = ("estimate", "fit")
 BAND_NOTE = (
     "1 sigma, first order in the fit's parameters, the home shift and the tare: a lower bound where a site's onset trades "
     "against its law (on the test stand-in, single presses' errors reach 3-5 band sigmas)"
