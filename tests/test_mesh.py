@@ -220,7 +220,9 @@ def test_a_closed_mould_of_two_parts_casts_its_enclosed_void(tmp_path):
     tags = np.asarray(mesh.face_tags)
     core = np.asarray(mesh.vertices)[np.asarray(mesh.boundary_faces)[tags == CORE]]
     np.testing.assert_allclose(core[..., 2], 0.0, atol=1e-9)
-    np.testing.assert_allclose(np.sum(0.5 * np.linalg.norm(np.cross(core[:, 1] - core[:, 0], core[:, 2] - core[:, 0]), axis=1)), 16e-6, rtol=1e-6)
+    # The board face's area to TetWild's envelope (it may round a rim vertex off the face
+    # by up to 1e-3 of the diagonal: CI's build of it gave 1.59983e-5 m², 1e-4 short).
+    np.testing.assert_allclose(np.sum(0.5 * np.linalg.norm(np.cross(core[:, 1] - core[:, 0], core[:, 2] - core[:, 0]), axis=1)), 16e-6, rtol=2e-3)
 
 
 @pytest.mark.parametrize(
