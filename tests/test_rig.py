@@ -29,11 +29,25 @@ SHIFT = 0.3e-3  # the stage's x = 0 sits this far along the sensor's x: the rig 
 SESSION = StageSession(
     sites=((-1e-3, 0.0), (0.0, 0.0), (1e-3, 0.0)), hold_range=(5.0, 8.0), rest_range=(1.0, 2.0), num_gaps=0, drift_range=(100.0, 300.0), seed=3,
 )
+# Each barometer's own sensitivity (its potting and port): geometric mean 1, so E keeps
+# its scale and the fit's relative gains must find these.
+GAINS = {"f0": 0.8, "f1": 1.25, "f2": 1.1, "f3": 1.0 / 1.1}
+
+
+def with_gains(log):
+    """The stand-in as barometers of these sensitivities read it: each channel's
+    excursion from its first reading scaled (the contact, its drift and noise alike;
+    scaling ~100 kPa of atmosphere would push it past the part's range)."""
+    for name, gain in GAINS.items():
+        readings = np.asarray(log.columns[name])
+        log.columns[name] = readings[0] + gain * (readings - readings[0])
+    return log
 
 
 @pytest.fixture(scope="module")
 def stand_in():
     log, truth = simulate_stage_log(str(FINGERTIP_SENSOR), PROBE, MATERIAL, SESSION, num_rays=16)
+    log = with_gains(log)
     log.metadata["sensor"] = str(FINGERTIP_SENSOR)
     log.columns["stage_x"] = np.asarray(log.columns["stage_x"]) - SHIFT
     home = float(truth["contact_z_m"].max()) + SESSION.clearance + truth["home_offset_m"]
@@ -65,6 +79,13 @@ def test_a_stage_log_gives_back_its_material_offset_home_and_lag(stand_in):
     assert result.unidentified() == []
     # the baselines drift: a spline per channel, the first sample's value reported
     assert result.layout.drifts[0] > 1 and set(result.offsets()[0]) == {"f0", "f1", "f2", "f3"}
+    # each barometer's relative gain (their geometric mean 1: the last follows from the others)
+    gains = result.gains
+    assert problem.relative_gains and list(gains) == [f"{FINGERTIP_SENSOR}/{name}" for name in GAINS]
+    for name, truth_gain in GAINS.items():
+        estimate = gains[f"{FINGERTIP_SENSOR}/{name}"]
+        assert 0.0 < estimate.std < 0.02 and estimate.value == pytest.approx(truth_gain, abs=max(4 * estimate.std, 0.01)), (name, estimate)
+    np.testing.assert_allclose(np.prod([g.value for g in gains.values()]), 1.0, rtol=1e-12)
 
 
 def test_the_rig_parameters_gradients_match_finite_differences(stand_in):
@@ -111,9 +132,11 @@ def test_the_command_line_fits_a_stage_log_and_predicts_a_held_out_one(stand_in,
     report = json.loads(result.stdout)
     assert report["rig"]["offset_x"]["value"] == pytest.approx(SHIFT, abs=10e-6) and report["rig"]["offset_x"]["identified"]
     assert report["rig"]["offset_y"] == {"value": 0.0, "std": 0.0, "identified": True, "fitted": False}
-    assert report["drift_columns"][0] > 1
+    assert report["drift_columns"][0] > 1 and report["gains_relative"]
+    assert report["gains"][f"{FINGERTIP_SENSOR}/f0"]["value"] == pytest.approx(0.8, rel=0.03)
     assert (tmp_path / "fit" / "material.json").is_file() and (tmp_path / "fit" / "rig_table.npz").is_file()
     held_out, held_truth = simulate_stage_log(str(FINGERTIP_SENSOR), PROBE, MATERIAL, dataclasses.replace(SESSION, seed=11, hold_range=(8.0, 10.0)), num_rays=16)
+    held_out = with_gains(held_out)
     held_out.metadata["sensor"] = str(FINGERTIP_SENSOR)
     held_out.columns["stage_x"] = np.asarray(held_out.columns["stage_x"]) - SHIFT
     write_log(tmp_path / "held_out.parquet", held_out)
@@ -129,6 +152,12 @@ def test_the_command_line_fits_a_stage_log_and_predicts_a_held_out_one(stand_in,
     # a lumped fit has no sensor to place the probe on
     assert_one_line_error(run_main(capsys, "fit", path, "--rig", tmp_path / "rig.json", "--lumped", "-o", tmp_path / "f2"), "--rig", "--lumped")
     assert not (tmp_path / "f2").exists()
+    # free gains need force columns (a gain and E are not separable from pressures); a lumped fit has no gains
+    free = run_main(capsys, "fit", path, "--rig", tmp_path / "rig.json", "--gains", "free", "-o", tmp_path / "f3")  # after the log's jitter warning
+    assert free.returncode == 2 and "Traceback" not in free.stderr
+    assert free.stderr.strip().splitlines()[-1].startswith("hydrotact: error: --gains free: no log has force columns")
+    assert_one_line_error(run_main(capsys, "fit", path, "--lumped", "--gains", "relative", "-o", tmp_path / "f4"), "--gains", "--lumped")
+    assert not (tmp_path / "f3").exists() and not (tmp_path / "f4").exists()
 
 
 RIG = {"format": "hydrotact.rig", "version": 1, "units": {"length": "mm"}, "probe": PROBE, "home": {"start": 5.0, "min": 4.0, "max": 6.0}}

@@ -52,6 +52,11 @@ def add_parser(subparsers):
         help="readings at or above this are clipped and masked (default: the part's upper limit for absolute logs of a known sensor; --lumped: flat maxima always)",
     )
     parser.add_argument(
+        "--gains", choices=("fixed", "free", "relative"),
+        help="full mode: each responding channel's gain: 1 (fixed), its own (free: needs force columns, which fix E's scale), or relative (their "
+        "geometric mean 1: each barometer's own sensitivity, the mean is E's); default free with force columns, relative with --rig, else fixed",
+    )
+    parser.add_argument(
         "--press-threshold", type=number, default=0.05, metavar="F",
         help="--lumped: a press is where the travel is above its rest level by this fraction of its range (default 0.05)",
     )
@@ -80,6 +85,8 @@ def run(args) -> None:
 
     drift = parse_drift(args.drift if args.drift is not None else ("30" if args.lumped or args.rig else "none"))
     if args.lumped:
+        if args.gains is not None:
+            raise HydrotactError("--gains: a lumped fit has its own law per channel (no gains to fix or free); leave out --gains or --lumped")
         if args.rig is not None:
             raise HydrotactError("--rig: a lumped fit has no sensor model to place the probe on; leave out --lumped (a full fit of stage logs) or --rig")
         method = LumpedFit(
@@ -88,7 +95,10 @@ def run(args) -> None:
             threshold=args.press_threshold, starts=parse_starts(args.starts),
         )
     else:
-        method = SimulatorFit(sensor=args.sensor, field=args.field, num_rays=args.rays, progress=not args.json, rig=args.rig, drift=drift, saturation_pa=args.saturation)
+        method = SimulatorFit(
+            sensor=args.sensor, field=args.field, num_rays=args.rays, progress=not args.json, rig=args.rig, drift=drift,
+            saturation_pa=args.saturation, gains=args.gains,
+        )
     report = fit_logs(
         args.logs, args.output, method=method, mapping=args.mapping, terms=args.terms, solver=args.solver, tare=args.tare,
         plot=plot_press_fit if args.lumped else plot_fit, max_steps=args.max_steps,

@@ -184,7 +184,15 @@ class FitResult:
 
     @property
     def gains(self) -> dict:
-        return {name: self._estimate(f"log_gain[{name}]") for name in self.problem.gain_names}
+        """Each free gain (sensor/channel -> Estimate). Relative gains: the last is the
+        inverse of the others' product; its error from their covariance."""
+        names = self.problem.gain_names
+        result = {name: self._estimate(f"log_gain[{name}]") for name in names[: self.layout.num_gain_parameters]}
+        if self.layout.relative_gains and names:
+            k = [self.names.index(f"log_gain[{name}]") for name in names[:-1]]
+            value = float(np.exp(-np.sum(self.x[k])))
+            result[names[-1]] = Estimate(value, value * float(np.sqrt(max(np.sum(self.covariance[np.ix_(k, k)]), 0.0))))
+        return result
 
     def offsets(self) -> list[dict]:
         """Per log: channel -> offset estimate (Pa); with a drifting baseline, its
@@ -305,7 +313,7 @@ def make_initial_guess(problem: FitProblem, num_terms: int) -> tuple[ParameterLa
     # Baselines: each channel's misfit at the start, in noise units, on its drift basis
     # (its mean, for a constant offset), over the samples that count.
     predictions = _predict(jnp.asarray(x0), problem.without_infos(), layout)
-    first = layout.num_material + layout.num_gains
+    first = layout.num_material + layout.num_gain_parameters
     for log, prediction, size in zip(problem.logs, predictions, layout.drifts):
         count = log.num_channels
         misfit = (np.asarray(log.observed)[:, :count] - np.asarray(prediction)[:, :count]) / np.asarray(log.offset_scale)
@@ -325,7 +333,7 @@ def _bounds(problem: FitProblem, layout: ParameterLayout, x0: np.ndarray):
     span = max(float(log.times[-1] - log.times[0]) for log in problem.logs)
     k = slice(1 + layout.num_terms, 1 + 2 * layout.num_terms)
     lower[k], upper[k] = np.log(shortest / 10.0), np.log(10.0 * span)
-    for sl in (slice(0, 1 + layout.num_terms), slice(layout.num_material, layout.num_material + layout.num_gains)):
+    for sl in (slice(0, 1 + layout.num_terms), slice(layout.num_material, layout.num_material + layout.num_gain_parameters)):
         lower[sl], upper[sl] = x0[sl] - np.log(1e6), x0[sl] + np.log(1e6)
     return jnp.asarray(lower), jnp.asarray(upper)
 

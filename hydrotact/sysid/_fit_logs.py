@@ -104,7 +104,10 @@ class SimulatorFit:
     or its file) places the probe from the stage's columns and fits its offsets,
     home and lag; `drift` is each channel's baseline per log ("none": a constant
     offset, "linear", or a spline knot spacing in s); readings at or above
-    `saturation_pa` are masked as clipped (besides the part's range limits)."""
+    `saturation_pa` are masked as clipped (besides the part's range limits);
+    `gains` each responding channel's gain: "fixed" (1), "free" (needs force
+    columns), "relative" (geometric mean 1), or None (free with force columns,
+    relative for stage logs, else fixed: :func:`make_fit_problem`)."""
 
     sensor: str | None = None
     field: str | None = None
@@ -113,6 +116,7 @@ class SimulatorFit:
     rig: object = None
     drift: object = "none"
     saturation_pa: float | None = None
+    gains: str | None = None
 
 
 def fit_logs(paths, output, *, method=None, terms="auto", solver=None, tare=False, mapping=None, plot=None, max_steps=None) -> dict:
@@ -179,7 +183,10 @@ def fit_logs(paths, output, *, method=None, terms="auto", solver=None, tare=Fals
                     f"{path}: {int(clipped.sum())} readings on {len(names)} channels ({', '.join(names[:4])}{', ...' if len(names) > 4 else ''}) sit at the "
                     "part's range limits (the barometer clipped them): masked, not fitted"
                 )
-        problem = make_fit_problem(logs, field=field, num_rays=num_rays, sources=[str(p) for p in paths], progress=progress, rig=rig, drift=drift, saturation_pa=method.saturation_pa)
+        problem = make_fit_problem(
+            logs, field=field, num_rays=num_rays, sources=[str(p) for p in paths], progress=progress, rig=rig, drift=drift,
+            saturation_pa=method.saturation_pa, gains=method.gains,
+        )
         counts = list(range(MAX_AUTO_TERMS + 1)) if terms == "auto" else [terms]
         with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} fits"), TimeElapsedColumn(), transient=True, disable=not progress) as bar:
             task = bar.add_task(f"fitting ({name})", total=len(counts))

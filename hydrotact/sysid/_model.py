@@ -4,7 +4,8 @@ All parameters live in one flat vector x, positive ones as logarithms:
 
     log E∞
     log E₁ … log E_K, log τ₁ … log τ_K
-    log gain  per free channel gain
+    log gain  per free channel gain (relative gains: all but the last, whose log is
+              minus the others' sum: their geometric mean is 1)
     θ         per log, channel and drift column: baseline = base + noise · (drift @ θ)
     u         per fitted rig parameter (stage logs): value = centre + half · tanh(u)
 
@@ -28,6 +29,12 @@ class ParameterLayout(eqx.Module):
     channel_counts: tuple[int, ...] = eqx.field(static=True)
     drift_sizes: tuple[int, ...] = eqx.field(static=True, default=())  # D per log (default 1)
     rig_free: tuple[int, ...] = eqx.field(static=True, default=())  # the fitted rig parameters (RigArrays.names' indices)
+    relative_gains: bool = eqx.field(static=True, default=False)
+
+    @property
+    def num_gain_parameters(self) -> int:
+        """The gains' entries in x: one fewer than the gains where they are relative."""
+        return max(self.num_gains - 1, 0) if self.relative_gains else self.num_gains
 
     @property
     def num_material(self) -> int:
@@ -47,14 +54,14 @@ class ParameterLayout(eqx.Module):
 
     @property
     def size(self) -> int:
-        return self.num_material + self.num_gains + self.num_offsets + len(self.rig_free)
+        return self.num_material + self.num_gain_parameters + self.num_offsets + len(self.rig_free)
 
     def names(self, problem: FitProblem) -> list[str]:
         """Parameter names, in x's order (as in the covariance matrix)."""
         names = ["log_long_term_modulus"]
         names += [f"log_modulus_{k + 1}" for k in range(self.num_terms)]
         names += [f"log_tau_{k + 1}" for k in range(self.num_terms)]
-        names += [f"log_gain[{name}]" for name in problem.gain_names]
+        names += [f"log_gain[{name}]" for name in problem.gain_names[: self.num_gain_parameters]]
         for k, (info, size) in enumerate(zip(problem.infos, self.drifts)):
             for channel in info.channels:
                 names += [f"offset[{k + 1}/{channel}]"] if size == 1 else [f"drift[{k + 1}/{channel}/{j + 1}]" for j in range(size)]
@@ -75,7 +82,10 @@ class ParameterLayout(eqx.Module):
         long_term = jnp.exp(take(1)[0])
         moduli = jnp.exp(take(self.num_terms))
         taus = jnp.exp(take(self.num_terms))
-        gains = jnp.exp(take(self.num_gains))
+        log_gains = take(self.num_gain_parameters)
+        if self.relative_gains and self.num_gains:
+            log_gains = jnp.concatenate([log_gains, -jnp.sum(log_gains, keepdims=True)])
+        gains = jnp.exp(log_gains)
         offsets = take(self.num_offsets)
         rig = take(len(self.rig_free))
         return {"prony": Prony(long_term, moduli, taus), "gains": gains, "offsets": offsets, "rig": rig}
@@ -85,6 +95,7 @@ def make_layout(problem: FitProblem, num_terms: int) -> ParameterLayout:
     return ParameterLayout(
         num_terms=int(num_terms), num_gains=len(problem.gain_names), channel_counts=tuple(log.num_channels for log in problem.logs),
         drift_sizes=tuple(int(log.drift.shape[1]) for log in problem.logs), rig_free=() if problem.rig is None else problem.rig.free,
+        relative_gains=problem.relative_gains,
     )
 
 
@@ -126,7 +137,8 @@ def pack(layout: ParameterLayout, *, long_term, moduli, taus, gains, offsets, ri
     u, :func:`rig_start`)."""
     pieces = [np.log([long_term])]
     pieces += [np.log(np.asarray(moduli, dtype=np.float64)), np.log(np.asarray(taus, dtype=np.float64))]
-    pieces += [np.log(np.asarray(gains, dtype=np.float64)), np.asarray(offsets, dtype=np.float64), np.asarray(rig, dtype=np.float64)]
+    log_gains = np.log(np.asarray(gains, dtype=np.float64))[: layout.num_gain_parameters]  # relative: the last is the others' sum
+    pieces += [log_gains, np.asarray(offsets, dtype=np.float64), np.asarray(rig, dtype=np.float64)]
     x = np.concatenate([np.atleast_1d(piece) for piece in pieces])
     assert x.shape == (layout.size,)
     return x

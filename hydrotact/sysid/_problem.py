@@ -105,7 +105,8 @@ class FitProblem(eqx.Module):
     """A system-identification problem: the logs and how they are modelled.
 
     `gain_names` the shared channel gains that are free (keyed `sensor/channel`);
-    `logs` LogArrays; `infos` LogInfo per log (static); `rig` the stage rig's
+    with `relative_gains` (static) they are relative: their geometric mean is 1 (a
+    pressure-only fit: the gains' common scale is E's); `logs` LogArrays; `infos` LogInfo per log (static); `rig` the stage rig's
     arrays (:class:`RigArrays`: its table, the stage columns, the bounds) for stage
     logs, with `rig_start` (static) every rig parameter's start; else None.
     """
@@ -115,6 +116,7 @@ class FitProblem(eqx.Module):
     infos: tuple[LogInfo, ...] = eqx.field(static=True)
     rig: RigArrays | None = None
     rig_start: tuple[float, ...] = eqx.field(static=True, default=())
+    relative_gains: bool = eqx.field(static=True, default=False)
 
     @property
     def num_samples(self) -> int:
@@ -125,7 +127,7 @@ class FitProblem(eqx.Module):
         """The same problem without the per-log descriptions: what jitted calls get,
         so that logs of the same shapes share one compilation (the descriptions are
         static and differ from log to log)."""
-        return FitProblem(logs=self.logs, gain_names=self.gain_names, infos=(), rig=self.rig, rig_start=self.rig_start)
+        return dataclasses.replace(self, infos=())
 
 
 def file_digest(path) -> str | None:
@@ -195,7 +197,7 @@ def _channel_values(log) -> np.ndarray:
 
 def make_fit_problem(
     logs, *, field: str | None = None, num_rays: int | None = None, use_forces: bool = True,
-    unit_responses=None, sources=None, progress: bool = False, rig=None, drift="none", saturation_pa=None,
+    unit_responses=None, sources=None, progress: bool = False, rig=None, drift="none", saturation_pa=None, gains: str | None = None,
 ) -> FitProblem:
     """Build a FitProblem from BarometerLogs (host).
 
@@ -219,12 +221,22 @@ def make_fit_problem(
       "linear", or a knot spacing in s (cubic B-splines: a drifting barometer).
     - `saturation_pa`: readings at or above this are clipped too (masked), besides
       those at the part's range limits.
+    - `gains`: each responding channel's gain (shared by logs of one sensor):
+      "fixed" (1, what a pressure-only fit of a simulated sensor assumes), "free" (its
+      own scale: needs the force columns, which fix E's), or "relative" (free with
+      their geometric mean 1: a barometer's potting, port and part set its
+      sensitivity, the mean is E's). Default: "free" where a log has force columns,
+      "relative" for stage logs (`rig`), else "fixed".
     """
     if not logs:
         raise HydrotactError("no logs to fit")
     if num_rays is not None and (int(num_rays) != num_rays or num_rays < 1):
         raise HydrotactError(f"--rays: rays per taxel must be at least 1, got {num_rays}")
     sources = list(sources) if sources is not None else [f"log {k + 1}" for k in range(len(logs))]
+    if gains not in (None, "fixed", "free", "relative"):
+        raise HydrotactError(f"--gains: one of fixed, free, relative, got {gains!r}")
+    if gains == "free" and not (use_forces and any(name in log.columns for log in logs for name in FORCE_COLUMNS)):
+        raise HydrotactError("--gains free: no log has force columns (fx, fy, fz) to fix the modulus' scale (a gain and E are not separable); use --gains relative")
     rig_arrays = rig_starts = None
     if rig is not None:
         from ..contact import parse_probe
@@ -271,8 +283,9 @@ def make_fit_problem(
         clipped[:, :num_channels] = find_clipped_readings(log, observed[:, :num_channels], saturation_pa)
         noise = estimate_noise(observed)
         gain_index = np.full(num_channels, -1)
-        if force_columns:
+        if gains in ("free", "relative") or (gains is None and (force_columns or rig is not None)):
             strength = np.max(np.abs(inputs[:, :num_channels]), axis=0)
+            strength[np.all(clipped[:, :num_channels], axis=0)] = 0.0  # every reading clipped: nothing tells its gain
             for c in np.flatnonzero(strength > _SILENT_FRACTION * strength.max()):
                 name = f"{log.metadata['sensor']}/{channels[c]}"
                 if name not in gain_names:
@@ -300,7 +313,8 @@ def make_fit_problem(
         )
     if rig_arrays is not None:
         rig_arrays = eqx.tree_at(lambda r: r.columns, rig_arrays, tuple(jnp.asarray(c) for c in columns))
+    relative = gains == "relative" or (gains is None and rig is not None and not any(info.force_columns for info in infos))
     return FitProblem(
         logs=tuple(prepared), gain_names=tuple(gain_names), infos=tuple(infos), rig=rig_arrays,
-        rig_start=() if rig_starts is None else tuple(float(v) for v in rig_starts),
+        rig_start=() if rig_starts is None else tuple(float(v) for v in rig_starts), relative_gains=relative,
     )

@@ -99,6 +99,7 @@ def make_report(result: FitResult) -> dict:
             {"modulus_Pa": _identified(m, m_ok), "tau_s": _identified(t, t_ok)} for (m, t), (m_ok, t_ok) in zip(result.terms, result.identification())
         ],
         "gains": {name: estimate.to_json() for name, estimate in result.gains.items()},
+        "gains_relative": bool(result.layout.relative_gains),
         "offsets_Pa": [{"source": info.source, "channels": {k: v.to_json() for k, v in offsets.items()}} for info, offsets in zip(result.problem.infos, result.offsets())],
         "residuals": result.residual_diagnostics(),
     }

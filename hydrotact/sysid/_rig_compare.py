@@ -77,11 +77,11 @@ def compare_rig_log(prony, report, table, log, source, *, tare="no-load", home="
         setup, rig = report["rig_setup"], report["rig"]
         columns = dict(setup["columns"])
         sensor = {entry.get("sensor") for entry in report.get("logs", [])} - {None}
-        name = log.metadata.get("sensor")
-        if name in (None, "", UNNAMED) and len(sensor) == 1:  # a log that names no sensor is of the fitted one
-            name = next(iter(sensor))
-        if sensor and name not in sensor:
-            raise HydrotactError(f"{source}: sensor {name!r}, but the fit is of {', '.join(sorted(sensor))}: compare logs of the fitted sensor")
+        sensor_name = log.metadata.get("sensor")
+        if sensor_name in (None, "", UNNAMED) and len(sensor) == 1:  # a log that names no sensor is of the fitted one
+            sensor_name = next(iter(sensor))
+        if sensor and sensor_name not in sensor:
+            raise HydrotactError(f"{source}: sensor {sensor_name!r}, but the fit is of {', '.join(sorted(sensor))}: compare logs of the fitted sensor")
         channels = tuple(log.metadata["channels"])
         if table.values.shape[-1] != len(channels) + 3:
             raise HydrotactError(f"{source}: {len(channels)} channels, but the fit's table has {table.values.shape[-1] - 3}")
@@ -93,21 +93,21 @@ def compare_rig_log(prony, report, table, log, source, *, tare="no-load", home="
         y = np.asarray(log.columns[columns["y"]], dtype=np.float64) if columns["y"] in log.columns else np.zeros_like(times)
         xy = np.column_stack([np.asarray(log.columns[columns["x"]], dtype=np.float64) + rig["offset_x"]["value"], y + rig["offset_y"]["value"]])
         origin, step, shape = np.asarray(table.origin), np.asarray(table.step), table.values.shape
-        for axis, name in ((0, "x"), (1, "y")):
+        for axis, label in ((0, "x"), (1, "y")):
             low, high = origin[axis], origin[axis] + step[axis] * (shape[axis] - 1)
             outside = (xy[:, axis] < low - 1e-9) | (xy[:, axis] > high + 1e-9)
             if outside.any():
                 row = int(np.flatnonzero(outside)[0])
                 raise HydrotactError(
-                    f"{source}: row {row + 1}: the tip at {name} = {xy[row, axis] * 1e3:.3f} mm lies outside the fit's response table "
+                    f"{source}: row {row + 1}: the tip at {label} = {xy[row, axis] * 1e3:.3f} mm lies outside the fit's response table "
                     f"({low * 1e3:.3f} to {high * 1e3:.3f} mm): fit with logs (or rig bounds) that cover it"
                 )
-        gains = np.array([report.get("gains", {}).get(f"{name}/{channel}", {}).get("value", 1.0) for channel in channels])
-        observed = np.column_stack([np.asarray(log.columns[name], dtype=np.float64) for name in channels])
+        gains = np.array([report.get("gains", {}).get(f"{sensor_name}/{channel}", {}).get("value", 1.0) for channel in channels])
+        observed = np.column_stack([np.asarray(log.columns[channel], dtype=np.float64) for channel in channels])
         mask = ~find_clipped_readings(log, observed, setup.get("saturation_pa"))
         noise = np.array([estimate_noise(observed[mask[:, c], c : c + 1])[0] for c in range(len(channels))])
         basis = drift_basis(times, setup["drift"])
-        homes = [rig[name]["value"] for name in rig if name.startswith("home[")]
+        homes = [rig[key]["value"] for key in rig if key.startswith("home[")]
         low, high = setup["bounds"]["home"]
         digest = file_digest(source)
         own = [k for k, entry in enumerate(report.get("logs", [])) if digest is not None and entry.get("sha256") == digest]
