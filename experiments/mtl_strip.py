@@ -37,7 +37,8 @@ into this repository: the committed results are the table and the figure.
    its 1,700-1,950 and 2,150-2,350), the lag within 0-0.2 s), each group of three
    logs (with and without the vacuum) fitted whole and, leaving each log out, from
    the other two (`hydrotact fit --rig` through `fit_logs`: 2 Prony terms, 30 s drift
-   knots, readings above 140.5 kPa masked), and each left-out log predicted
+   knots, each barometer's relative gain (their geometric mean 1), readings above
+   140.5 kPa masked), and each left-out log predicted
    (`compare`, its tare its first 20 s: the README's fair comparison), each channel's
    RMS against the lumped fit's on the same split (mtl_calibration.json, where it is
    in --output).
@@ -305,6 +306,7 @@ STEPS_PER_M = 480e3  # the README: 480 steps per mm
 SATURATION_PA = 140.5e3  # the README: mask samples above ~140.5 kPa
 MAX_TRAVEL_MM = 6.0  # the README: zd6 logs travel to 2880 steps
 SCORED = ("Sensor_1", "Sensor_2", "Sensor_3")
+GAINS = "relative"  # each barometer's own sensitivity, their geometric mean 1 (E keeps the scale)
 
 
 def make_rig_document(offset_mm: float, skin_top_mm: float, group: str) -> dict:
@@ -342,8 +344,8 @@ def fit_stage(spec_path: Path, logs: dict, work: Path, offset_mm: float, output:
         write_text_atomic(rig, json.dumps(make_rig_document(offset_mm, top, group), indent=1) + "\n")
         for left in (None, *names):
             fitted = [n for n in names if n != left]
-            folder = work / (f"fit_{group}" + ("" if left is None else f"_without_{left}"))
-            method = SimulatorFit(sensor=str(spec_path), num_rays=16, progress=False, rig=rig, drift=30.0, saturation_pa=SATURATION_PA)
+            folder = work / (f"fit_{GAINS}_{group}" + ("" if left is None else f"_without_{left}"))
+            method = SimulatorFit(sensor=str(spec_path), num_rays=16, progress=False, rig=rig, drift=30.0, saturation_pa=SATURATION_PA, gains=GAINS)
             if not (folder / "fit" / "report.json").is_file():
                 start = time.perf_counter()
                 fit_logs([logs[n] for n in fitted], folder / "fit", method=method, terms=2, mapping=mapping)
@@ -353,6 +355,7 @@ def fit_stage(spec_path: Path, logs: dict, work: Path, offset_mm: float, output:
                 "group": group, "fitted": fitted, "compared": left, "fit_seconds": float((folder / "seconds.txt").read_text()) if (folder / "seconds.txt").is_file() else None,
                 "reduced_chi_square": report["reduced_chi_square"], "long_term_modulus_Pa": report["long_term_modulus_Pa"],
                 "prony_terms": report["prony_terms"], "rig": report["rig"],
+                "gains": {name.split("/")[-1]: value for name, value in report["gains"].items()},
                 "fit_rms_Pa": {entry["source"].split("/")[-1]: {c: v["rms"] for c, v in entry["columns"].items()} for entry in report["residuals"]},
             }
             if left is not None:
@@ -366,7 +369,7 @@ def fit_stage(spec_path: Path, logs: dict, work: Path, offset_mm: float, output:
             cases.append(case)
             print(f"{group} {'whole' if left is None else 'without ' + left}: E_inf {report['long_term_modulus_Pa']['value'] / 1e6:.3f} MPa"
                   + (f", held out {case['compare_pooled_rms_Pa']:.0f} Pa pooled RMS" if left else ""), flush=True)
-    return {"sensor": "pocket", "saturation_Pa": SATURATION_PA, "tare": "first:20", "cases": cases}
+    return {"sensor": "pocket", "saturation_Pa": SATURATION_PA, "tare": "first:20", "gains": GAINS, "cases": cases}
 
 
 def _lumped_held_out(output: Path) -> dict:
@@ -383,8 +386,8 @@ def _lumped_held_out(output: Path) -> dict:
 
 def fit_table(fit: dict) -> list:
     """The fit stage's table lines (markdown)."""
-    lines = ["| group | fitted | E∞ (MPa) | slow term (MPa, s) | offset x (mm) | lag (ms) | held out | RMS Sensor_1-3 (Pa) | pooled (Pa) | lumped, same split (Pa) |",
-             "|---|---|---:|---|---:|---:|---|---|---:|---:|"]
+    lines = ["| group | fitted | E∞ (MPa) | slow term (MPa, s) | offset x (mm) | lag (ms) | gains Sensor_0-3 | held out | RMS Sensor_1-3 (Pa) | pooled (Pa) | lumped, same split (Pa) |",
+             "|---|---|---:|---|---:|---:|---|---|---|---:|---:|"]
     for case in fit["cases"]:
         modulus = case["long_term_modulus_Pa"]
         slow = max(case["prony_terms"], key=lambda term: term["tau_s"]["value"])
@@ -395,9 +398,10 @@ def fit_table(fit: dict) -> list:
         rms = ", ".join(f"{case['compare_rms_Pa'][c]:.0f}" for c in SCORED) if case["compared"] else "-"
         pooled = f"{case['compare_pooled_rms_Pa']:.0f}" if case["compared"] else "-"
         lumped = f"{case['lumped_compare_pooled_rms_Pa']:.0f}" if case.get("lumped_compare_pooled_rms_Pa") else "-"
+        gains = ", ".join(f"{case['gains'][c]['value']:.2f}" if c in case.get("gains", {}) else "1" for c in CHANNELS)
         lines.append(
             f"| {case['group']} | {len(case['fitted'])} logs | {modulus['value'] / 1e6:.2f} ± {modulus['std'] / 1e6:.2f} | "
-            f"{slow_text} | {rig['offset_x']['value'] * 1e3:.2f} | {rig['lag_s']['value'] * 1e3:.0f} | "
+            f"{slow_text} | {rig['offset_x']['value'] * 1e3:.2f} | {rig['lag_s']['value'] * 1e3:.0f} | {gains} | "
             f"{held} | {rms} | {pooled} | {lumped} |"
         )
     return lines

@@ -88,6 +88,27 @@ def test_a_stage_log_gives_back_its_material_offset_home_and_lag(stand_in):
     np.testing.assert_allclose(np.prod([g.value for g in gains.values()]), 1.0, rtol=1e-12)
 
 
+def test_a_barometer_that_barely_reads_is_fitted_outside_the_gains_mean(stand_in):
+    """f3 reading a twentieth of what it should (a barometer gone dead in its pocket):
+    its gain is fitted on its own, and the other three's geometric mean sets E's
+    scale, as if f3 were not there; the fit says which channel it set apart."""
+    log, _, _, rig, _ = stand_in
+    weak = dataclasses.replace(log, columns=dict(log.columns))
+    readings = np.asarray(log.columns["f3"])
+    weak.columns["f3"] = readings[0] + 0.05 * (readings - readings[0])
+    problem = make_fit_problem([weak], rig=rig, drift=30.0, num_rays=16, sources=["weak"])
+    assert problem.num_reference_gains == 3 and problem.gain_names[-1].endswith("/f3")
+    result = fit_problem(problem, 1)
+    assert result.converged and result.reduced_chi_square < 1.5
+    assert result.gains_outside_the_mean() == [f"{FINGERTIP_SENSOR}/f3"]
+    mean = np.prod([GAINS[name] for name in ("f0", "f1", "f2")]) ** (1 / 3)  # the reference's scale passes into E
+    assert result.long_term_modulus.value == pytest.approx(2e5 * mean, rel=0.03)
+    gains = result.gains
+    for name in ("f0", "f1", "f2"):
+        assert gains[f"{FINGERTIP_SENSOR}/{name}"].value == pytest.approx(GAINS[name] / mean, rel=0.01), name
+    assert gains[f"{FINGERTIP_SENSOR}/f3"].value == pytest.approx(0.05 * GAINS["f3"] / mean, rel=0.05)
+
+
 def test_the_rig_parameters_gradients_match_finite_differences(stand_in):
     """The residuals' derivatives in each fitted rig parameter (through the table's
     interpolation and the lagged travel) against central differences, away from

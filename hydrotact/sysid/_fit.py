@@ -184,15 +184,25 @@ class FitResult:
 
     @property
     def gains(self) -> dict:
-        """Each free gain (sensor/channel -> Estimate). Relative gains: the last is the
-        inverse of the others' product; its error from their covariance."""
-        names = self.problem.gain_names
-        result = {name: self._estimate(f"log_gain[{name}]") for name in names[: self.layout.num_gain_parameters]}
-        if self.layout.relative_gains and names:
-            k = [self.names.index(f"log_gain[{name}]") for name in names[:-1]]
+        """Each free gain (sensor/channel -> Estimate), in the problem's order.
+        Relative gains: the reference's last is the inverse of the reference's
+        others' product; its error from their covariance."""
+        names, derived = self.problem.gain_names, self.layout.derived_gain
+        result = {}
+        for j, name in enumerate(names):
+            if j != derived:
+                result[name] = self._estimate(f"log_gain[{name}]")
+                continue
+            k = [self.names.index(f"log_gain[{other}]") for other in names[:j]]
             value = float(np.exp(-np.sum(self.x[k])))
-            result[names[-1]] = Estimate(value, value * float(np.sqrt(max(np.sum(self.covariance[np.ix_(k, k)]), 0.0))))
+            result[name] = Estimate(value, value * float(np.sqrt(max(np.sum(self.covariance[np.ix_(k, k)]), 0.0))))
         return result
+
+    def gains_outside_the_mean(self) -> list[str]:
+        """Relative gains: the channels (sensor/channel) whose readings did not move as
+        the model's response does, against the others (dead, misplaced, or beyond the
+        model): fitted on their own, outside the reference's geometric mean."""
+        return list(self.problem.gain_names[self.layout.num_reference_gains :]) if self.layout.relative_gains else []
 
     def offsets(self) -> list[dict]:
         """Per log: channel -> offset estimate (Pa); with a drifting baseline, its
@@ -302,14 +312,16 @@ def make_initial_guess(problem: FitProblem, num_terms: int) -> tuple[ParameterLa
     layout = make_layout(problem, num_terms)
     times_list = [np.asarray(log.times) for log in problem.logs]
     grid = make_tau_grid(times_list)
-    blocks = [design_block(log.times, log.inputs, log.observed, log.weights, log.num_channels, grid) for log in problem.logs]
+    gains = np.asarray(problem.gain_starts) if problem.gain_starts else np.ones(layout.num_gains)
+    scales = [np.concatenate([np.append(gains, 1.0)[np.asarray(log.gain_index)], np.ones(log.inputs.shape[1] - log.num_channels)]) for log in problem.logs]
+    blocks = [design_block(log.times, np.asarray(log.inputs) * scale, log.observed, log.weights, log.num_channels, grid) for log, scale in zip(problem.logs, scales)]
     moduli = fit_linear_moduli(blocks)
     total = max(float(moduli.sum()), 1e-300)
     floor = _MODULUS_FLOOR * total
     long_term = max(float(moduli[0]), floor)
     taus, term_moduli = merge_terms(grid, moduli[1:], num_terms, floor)
     rig = () if problem.rig is None else rig_start(problem.rig, layout.rig_free, problem.rig_start)
-    x0 = pack(layout, long_term=long_term, moduli=term_moduli, taus=taus, gains=np.ones(layout.num_gains), offsets=np.zeros(layout.num_offsets), rig=rig)
+    x0 = pack(layout, long_term=long_term, moduli=term_moduli, taus=taus, gains=gains, offsets=np.zeros(layout.num_offsets), rig=rig)
     # Baselines: each channel's misfit at the start, in noise units, on its drift basis
     # (its mean, for a constant offset), over the samples that count.
     predictions = _predict(jnp.asarray(x0), problem.without_infos(), layout)

@@ -20,7 +20,7 @@ from .._files import check_output
 from ..data import LogWarning, read_log, read_rig, sensor_spec, tare_log
 from ._drift import parse_drift
 from ._fit import CHI_SQUARE_WARNING, MAX_AUTO_TERMS, fit_auto, fit_problem
-from ._problem import check_pose_columns, find_clipped_readings, log_probe, make_fit_problem
+from ._problem import OUTLIER_GAIN, check_pose_columns, find_clipped_readings, log_probe, make_fit_problem
 from ._report import write_fit_outputs
 from ._solve import make_solver, solver_name
 
@@ -202,6 +202,13 @@ def fit_logs(paths, output, *, method=None, terms="auto", solver=None, tare=Fals
             messages.append(
                 f"reduced χ² {result.reduced_chi_square:.3g}: the model misses the data by {math.sqrt(result.reduced_chi_square):.2g} noise stds RMS; "
                 "are the sensor, the channel names and the units right? (see residuals.png)"
+            )
+        outside = result.gains_outside_the_mean()
+        if outside:
+            messages.append(
+                f"{', '.join(name.split('/')[-1] for name in outside)}: the readings move over {OUTLIER_GAIN:g} × more or less than the model's response "
+                "of the channel, against the other channels: a barometer dead, misplaced or beyond the model; its gain is fitted on its own, outside "
+                "the gains' mean (which sets E's scale)"
             )
         unidentified = result.unidentified()
         if unidentified:

@@ -4,8 +4,9 @@ All parameters live in one flat vector x, positive ones as logarithms:
 
     log E∞
     log E₁ … log E_K, log τ₁ … log τ_K
-    log gain  per free channel gain (relative gains: all but the last, whose log is
-              minus the others' sum: their geometric mean is 1)
+    log gain  per free channel gain (relative gains: all but the reference's last,
+              whose log is minus the reference's others' sum: the reference's
+              geometric mean is 1; the outliers after it, free)
     θ         per log, channel and drift column: baseline = base + noise · (drift @ θ)
     u         per fitted rig parameter (stage logs): value = centre + half · tanh(u)
 
@@ -30,11 +31,17 @@ class ParameterLayout(eqx.Module):
     drift_sizes: tuple[int, ...] = eqx.field(static=True, default=())  # D per log (default 1)
     rig_free: tuple[int, ...] = eqx.field(static=True, default=())  # the fitted rig parameters (RigArrays.names' indices)
     relative_gains: bool = eqx.field(static=True, default=False)
+    num_reference_gains: int = eqx.field(static=True, default=0)  # relative: the first gains, geometric mean 1
+
+    @property
+    def derived_gain(self) -> int | None:
+        """The gain that x does not hold (relative gains: the reference's last), or None."""
+        return self.num_reference_gains - 1 if self.relative_gains and self.num_reference_gains else None
 
     @property
     def num_gain_parameters(self) -> int:
         """The gains' entries in x: one fewer than the gains where they are relative."""
-        return max(self.num_gains - 1, 0) if self.relative_gains else self.num_gains
+        return self.num_gains - (self.derived_gain is not None)
 
     @property
     def num_material(self) -> int:
@@ -61,7 +68,7 @@ class ParameterLayout(eqx.Module):
         names = ["log_long_term_modulus"]
         names += [f"log_modulus_{k + 1}" for k in range(self.num_terms)]
         names += [f"log_tau_{k + 1}" for k in range(self.num_terms)]
-        names += [f"log_gain[{name}]" for name in problem.gain_names[: self.num_gain_parameters]]
+        names += [f"log_gain[{name}]" for k, name in enumerate(problem.gain_names) if k != self.derived_gain]
         for k, (info, size) in enumerate(zip(problem.infos, self.drifts)):
             for channel in info.channels:
                 names += [f"offset[{k + 1}/{channel}]"] if size == 1 else [f"drift[{k + 1}/{channel}/{j + 1}]" for j in range(size)]
@@ -83,8 +90,9 @@ class ParameterLayout(eqx.Module):
         moduli = jnp.exp(take(self.num_terms))
         taus = jnp.exp(take(self.num_terms))
         log_gains = take(self.num_gain_parameters)
-        if self.relative_gains and self.num_gains:
-            log_gains = jnp.concatenate([log_gains, -jnp.sum(log_gains, keepdims=True)])
+        if self.derived_gain is not None:
+            k = self.derived_gain
+            log_gains = jnp.concatenate([log_gains[:k], -jnp.sum(log_gains[:k], keepdims=True), log_gains[k:]])
         gains = jnp.exp(log_gains)
         offsets = take(self.num_offsets)
         rig = take(len(self.rig_free))
@@ -95,7 +103,7 @@ def make_layout(problem: FitProblem, num_terms: int) -> ParameterLayout:
     return ParameterLayout(
         num_terms=int(num_terms), num_gains=len(problem.gain_names), channel_counts=tuple(log.num_channels for log in problem.logs),
         drift_sizes=tuple(int(log.drift.shape[1]) for log in problem.logs), rig_free=() if problem.rig is None else problem.rig.free,
-        relative_gains=problem.relative_gains,
+        relative_gains=problem.relative_gains, num_reference_gains=problem.num_reference_gains,
     )
 
 
@@ -137,7 +145,9 @@ def pack(layout: ParameterLayout, *, long_term, moduli, taus, gains, offsets, ri
     u, :func:`rig_start`)."""
     pieces = [np.log([long_term])]
     pieces += [np.log(np.asarray(moduli, dtype=np.float64)), np.log(np.asarray(taus, dtype=np.float64))]
-    log_gains = np.log(np.asarray(gains, dtype=np.float64))[: layout.num_gain_parameters]  # relative: the last is the others' sum
+    log_gains = np.log(np.asarray(gains, dtype=np.float64))
+    if layout.derived_gain is not None:  # relative: the reference's last follows from the others
+        log_gains = np.delete(log_gains, layout.derived_gain)
     pieces += [log_gains, np.asarray(offsets, dtype=np.float64), np.asarray(rig, dtype=np.float64)]
     x = np.concatenate([np.atleast_1d(piece) for piece in pieces])
     assert x.shape == (layout.size,)

@@ -39,6 +39,10 @@ ROTATION_COLUMNS = ("probe_rx", "probe_ry", "probe_rz")
 # Channels whose unit response stays below this fraction of the strongest channel's
 # never see the contact: their gain is not identifiable and stays 1.
 _SILENT_FRACTION = 1e-3
+# Relative gains: a channel whose readings move this many times more, or less, than
+# the model's response of it, against the channels' median, does not read as modelled
+# (dead, misplaced, or beyond the model): its gain is fitted outside the mean.
+OUTLIER_GAIN = 4.0
 
 
 def find_clipped_readings(log, channels, saturation_pa=None) -> np.ndarray:
@@ -105,8 +109,10 @@ class FitProblem(eqx.Module):
     """A system-identification problem: the logs and how they are modelled.
 
     `gain_names` the shared channel gains that are free (keyed `sensor/channel`);
-    with `relative_gains` (static) they are relative: their geometric mean is 1 (a
-    pressure-only fit: the gains' common scale is E's); `logs` LogArrays; `infos` LogInfo per log (static); `rig` the stage rig's
+    with `relative_gains` (static) the first `num_reference_gains` are relative:
+    their geometric mean is 1 (a pressure-only fit: the gains' common scale is E's);
+    the rest (channels that do not read as modelled, :data:`OUTLIER_GAIN`) are free
+    on their own; `logs` LogArrays; `infos` LogInfo per log (static); `rig` the stage rig's
     arrays (:class:`RigArrays`: its table, the stage columns, the bounds) for stage
     logs, with `rig_start` (static) every rig parameter's start; else None.
     """
@@ -117,6 +123,8 @@ class FitProblem(eqx.Module):
     rig: RigArrays | None = None
     rig_start: tuple[float, ...] = eqx.field(static=True, default=())
     relative_gains: bool = eqx.field(static=True, default=False)
+    num_reference_gains: int = eqx.field(static=True, default=0)
+    gain_starts: tuple[float, ...] = eqx.field(static=True, default=())  # relative: each gain's start (the reference's geometric mean 1)
 
     @property
     def num_samples(self) -> int:
@@ -249,7 +257,7 @@ def make_fit_problem(
         model = _log_model(logs[0], sources[0], log_field, log_rays)
         every = [np.arange(len(log.metadata["channels"]) + 3) for log in logs]
         rig_arrays, rig_starts = make_rig_arrays(rig, model, parse_probe(rig.probe), logs, sources, every, progress=progress, drift=drift, saturation_pa=saturation_pa)
-    prepared, infos, gain_names, columns = [], [], [], []
+    prepared, infos, gain_names, columns, excursions = [], [], [], [], {}
     for k, (log, source) in enumerate(zip(logs, sources)):
         if log.num_samples < 8:
             raise HydrotactError(f"{source}: {log.num_samples} samples; a fit needs at least 8")
@@ -291,6 +299,9 @@ def make_fit_problem(
                 if name not in gain_names:
                     gain_names.append(name)
                 gain_index[c] = gain_names.index(name)
+                used = ~clipped[:, c]  # how far the readings move for how far the model's response does (its scale is E's)
+                moved = np.percentile(observed[used, c], 99.5) - np.median(observed[used, c])
+                excursions.setdefault(name, []).append(moved / max(float(np.percentile(np.abs(inputs[used, c]), 99.5)), 1e-300))
         baseline = np.median(observed[: max(4, len(times) // 50), :num_channels], axis=0)
         prepared.append(
             LogArrays(
@@ -314,7 +325,30 @@ def make_fit_problem(
     if rig_arrays is not None:
         rig_arrays = eqx.tree_at(lambda r: r.columns, rig_arrays, tuple(jnp.asarray(c) for c in columns))
     relative = gains == "relative" or (gains is None and rig is not None and not any(info.force_columns for info in infos))
+    num_reference, starts = len(gain_names), ()
+    if relative and gain_names:
+        gain_names, num_reference, starts, prepared = _order_relative_gains(gain_names, excursions, prepared)
     return FitProblem(
         logs=tuple(prepared), gain_names=tuple(gain_names), infos=tuple(infos), rig=rig_arrays,
-        rig_start=() if rig_starts is None else tuple(float(v) for v in rig_starts), relative_gains=relative,
+        rig_start=() if rig_starts is None else tuple(float(v) for v in rig_starts), relative_gains=relative, num_reference_gains=num_reference,
+        gain_starts=starts,
     )
+
+
+def _order_relative_gains(gain_names, excursions, prepared):
+    """The relative gains' reference first (channels whose readings move, per unit of
+    the model's response, within :data:`OUTLIER_GAIN` of the channels' median), the
+    outliers after it; each log's gain_index remapped. Returns (names, the
+    reference's count, each gain's start (the ratio against the reference's
+    geometric mean), logs)."""
+    ratios = np.array([np.median(excursions[name]) for name in gain_names])
+    centre = np.median(ratios[ratios > 0.0]) if np.any(ratios > 0.0) else 1.0
+    outside = [not (centre / OUTLIER_GAIN <= ratio <= centre * OUTLIER_GAIN) for ratio in ratios]
+    order = [k for k in range(len(gain_names)) if not outside[k]] + [k for k in range(len(gain_names)) if outside[k]]
+    where = np.full(len(gain_names) + 1, -1)
+    where[np.asarray(order)] = np.arange(len(order))
+    prepared = [eqx.tree_at(lambda log: log.gain_index, log, jnp.asarray(where[np.asarray(log.gain_index)])) for log in prepared]
+    count = len(order) - sum(outside)
+    ratios = np.maximum(ratios[np.asarray(order)], 1e-6 * centre)
+    starts = ratios / np.exp(np.mean(np.log(ratios[:count])))
+    return [gain_names[k] for k in order], count, tuple(float(v) for v in starts), prepared

@@ -100,6 +100,7 @@ def make_report(result: FitResult) -> dict:
         ],
         "gains": {name: estimate.to_json() for name, estimate in result.gains.items()},
         "gains_relative": bool(result.layout.relative_gains),
+        "gains_outside_the_mean": result.gains_outside_the_mean(),
         "offsets_Pa": [{"source": info.source, "channels": {k: v.to_json() for k, v in offsets.items()}} for info, offsets in zip(result.problem.infos, result.offsets())],
         "residuals": result.residual_diagnostics(),
     }
