@@ -399,10 +399,11 @@ def test_sharp_rim_converges_more_slowly_but_converges(pad_model):
     xs = np.linspace(0.5e-3, 1.6e-3, 8)
     poses = jax.vmap(make_pose)(jnp.array([[x, 0.2e-3, PAD_TOP - 0.45e-3] for x in xs]))
     surfaces, _ = compute_contact_surface(pad_model.field, probe, poses, clusters=pad_model.clusters)
+    centre = _centre_taxel(pad_model).layout  # the others are not read: 25 x fewer rays to cast
 
     def centre_taxel(num_rays):
-        readings, _ = sample_taxels(pad_model.layout, surfaces, num_rays)  # more rays, more pieces: the buffers grow
-        return np.asarray(readings.pressures)[:, 12]
+        readings, _ = sample_taxels(centre, surfaces, num_rays)  # more rays, more pieces: the buffers grow
+        return np.asarray(readings.pressures)[:, 0]
 
     values = {n: centre_taxel(n) for n in (64, 256, 2048)}
     peak = values[2048].max()
@@ -414,9 +415,16 @@ def test_sharp_rim_converges_more_slowly_but_converges(pad_model):
 # --- gradients -----------------------------------------------------------------------
 
 
+def _centre_taxel(model: _Sensor) -> _Sensor:
+    """The pad with its centre taxel (b22, index 12) alone."""
+    return eqx.tree_at(lambda m: m.layout, model, jax.tree_util.tree_map(lambda a: a[12:13], model.layout))
+
+
 def test_gradients_match_finite_differences(pad_model):
     """d(taxel value)/d(probe translation, rotation, E, taxel position) against central
-    differences, on the pad pressed by a sphere (a smooth contact)."""
+    differences, on the pad pressed by a sphere (a smooth contact); the centre taxel
+    alone (the one read)."""
+    pad_model = _centre_taxel(pad_model)
     probe = make_sphere_probe(3e-3)
     base = np.array([0.7e-3, 0.3e-3, PAD_TOP - 0.5e-3])
     rotation = np.array([0.02, -0.01, 0.0])
@@ -424,8 +432,8 @@ def test_gradients_match_finite_differences(pad_model):
 
     def reading(model, translation, rotation_vector, modulus, positions):
         model = eqx.tree_at(lambda m: m.layout.positions_S, model, positions)
-        pressures, did_overflow = _unit_readings(model, probe, make_pose(translation, rotation_vector), contact_capacity, TaxelCapacity(1 << 14))
-        return modulus * pressures[12], did_overflow
+        pressures, did_overflow = _unit_readings(model, probe, make_pose(translation, rotation_vector), contact_capacity, TaxelCapacity())
+        return modulus * pressures[0], did_overflow
 
     jitted = eqx.filter_jit(reading)
 
@@ -445,11 +453,11 @@ def test_gradients_match_finite_differences(pad_model):
         assert float(grads[1][axis]) == pytest.approx(fd, rel=2e-4, abs=1e0), ("rotation", axis)
     fd = central_difference(lambda e: f(pad_model, args[1], args[2], e, args[4]), 2e5, 1.0, 10.0)
     assert float(grads[2]) == pytest.approx(fd, rel=1e-8)
-    direction = np.zeros((25, 3))
-    direction[12, 0] = 1.0
+    direction = np.zeros((1, 3))
+    direction[0, 0] = 1.0
     fd = central_difference(lambda p: f(*args[:4], p), np.asarray(pad_model.layout.positions_S), direction, 1e-8)
     assert abs(fd) > 1e3  # the taxel's position matters here: the check can fail
-    assert float(grads[3][12, 0]) == pytest.approx(fd, rel=2e-4, abs=1e2)
+    assert float(grads[3][0, 0]) == pytest.approx(fd, rel=2e-4, abs=1e2)
 
 
 def make_disc_surface(centre_x, height=PAD_TOP, radius=1e-3, sectors=32, slope=0.3):
