@@ -299,9 +299,7 @@ def make_fit_problem(
                 if name not in gain_names:
                     gain_names.append(name)
                 gain_index[c] = gain_names.index(name)
-                used = ~clipped[:, c]  # how far the readings move for how far the model's response does (its scale is E's)
-                moved = np.percentile(observed[used, c], 99.5) - np.median(observed[used, c])
-                excursions.setdefault(name, []).append(moved / max(float(np.percentile(np.abs(inputs[used, c]), 99.5)), 1e-300))
+                excursions.setdefault(name, []).append(_excursion_ratio(observed[:, c], inputs[:, c], ~clipped[:, c]))
         baseline = np.median(observed[: max(4, len(times) // 50), :num_channels], axis=0)
         prepared.append(
             LogArrays(
@@ -333,6 +331,19 @@ def make_fit_problem(
         rig_start=() if rig_starts is None else tuple(float(v) for v in rig_starts), relative_gains=relative, num_reference_gains=num_reference,
         gain_starts=starts,
     )
+
+
+def _excursion_ratio(observed, response, used) -> float:
+    """How far a channel's readings move, the way its unit response moves (up for a
+    pressure, down where the model says tension), per unit of that response: the
+    99.5th percentile of each from the readings' median (robust to spikes; its scale
+    is E's)."""
+    observed, response = observed[used], response[used]
+    if not len(observed):
+        return 0.0
+    sign = 1.0 if response[np.argmax(np.abs(response))] >= 0.0 else -1.0
+    moved = np.percentile(sign * (observed - np.median(observed)), 99.5)
+    return float(max(moved, 0.0) / max(float(np.percentile(np.abs(response), 99.5)), 1e-300))
 
 
 def _order_relative_gains(gain_names, excursions, prepared):
