@@ -176,7 +176,10 @@ def test_a_term_switched_off_is_the_fit_without_it():
     solved2 = solve_least_squares(press_residual_fn(two), start2, args, max_steps=200)
     solved3 = solve_least_squares(press_residual_fn(three), start3, args, max_steps=200)
     assert bool(solved2.converged) and bool(solved3.converged)
-    np.testing.assert_allclose(np.asarray(solved3.value)[keep], np.asarray(solved2.value), atol=1e-6)
+    # each solve stops once its next step is under xtol (1 + |x|inf) (1e-6 here): the two
+    # paths (their damping differs with the idle columns) end within that of each other
+    # (4.2e-6 measured on an AMD EPYC; under 1e-6 on the Intel Xeon)
+    np.testing.assert_allclose(np.asarray(solved3.value)[keep], np.asarray(solved2.value), atol=2e-6 * (1.0 + float(np.max(np.abs(solved2.value)))))
     assert np.asarray(solved3.value)[2] == float(start3[2]) and np.asarray(solved3.value)[5] == float(start3[5])
 
 
