@@ -355,6 +355,8 @@ def _order_relative_gains(gain_names, excursions, prepared):
     ratios = np.array([np.median(excursions[name]) for name in gain_names])
     centre = np.median(ratios[ratios > 0.0]) if np.any(ratios > 0.0) else 1.0
     outside = [not (centre / OUTLIER_GAIN <= ratio <= centre * OUTLIER_GAIN) for ratio in ratios]
+    if all(outside):  # no channel moved (every ratio 0): none to set apart from
+        outside = [False] * len(ratios)
     order = [k for k in range(len(gain_names)) if not outside[k]] + [k for k in range(len(gain_names)) if outside[k]]
     where = np.full(len(gain_names) + 1, -1)
     where[np.asarray(order)] = np.arange(len(order))
