@@ -106,7 +106,7 @@ def _child(name: str, count: int, folder: Path) -> dict:
     env = dict(os.environ)
     ray = None
     if name.startswith("local-"):
-        env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={name.split('-')[1]}"
+        env["XLA_FLAGS"] = f"{env.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count={name.split('-')[1]}".strip()
     if name.startswith("ray-"):
         ray = Path(tempfile.mkdtemp(prefix="ray-", dir="/tmp"))  # Ray's socket paths must stay under 108 bytes
         subprocess.run([RAY, "start", "--head", "--num-cpus=2", "--port=0", "--include-dashboard=false", f"--temp-dir={ray}", "--disable-usage-stats"], check=True, capture_output=True, env=env)

@@ -43,6 +43,22 @@ into this repository: the committed results are the table and the figure.
    RMS against the lumped fit's on the same split (mtl_calibration.json, where it is
    in --output).
 
+4. **Sim-to-real estimation** (`--stages estimate`): an estimator of the contact's x
+   along the strip and the indentation depth (`hydrotact train --targets x,depth`),
+   scored on real logs it never saw. Each real log is labelled from its group's whole
+   fit (`compare --labels`: the tip's x is the stage's plus the fitted offset, its
+   depth the home less the lagged travel below the skin, contact the fitted model's
+   force over 0.1 N). A synthetic dataset of the strip (`--regime stage`: straight-down
+   presses of the ball at random x over the logged span, depths 0.2-2.5 mm, the logs'
+   speeds, holds of 0-10 s, at the logs' 16.4 Hz; the pocket model with the
+   non-vacuum fit's material) pretrains the GRU. Leaving each real log out in turn,
+   its x and depth RMSE (over its contact samples) for (a) the model trained on the
+   simulation only, (b) the same architecture trained from scratch on 1 and on 3 real
+   logs, (c) the pretrained model fine-tuned on the same 1 and 3 logs (the logs of the
+   held-out log's state first; each cut 75/25 into training and validation). Every
+   log's channels are tared (each channel less its median over the log's first 20 s,
+   plus the simulation's resting level): a session's baselines move by kPa.
+
 Outputs (in --output, default experiments/results/): `mtl_strip.json` (the sensor's
 alignment, the simulated profiles, the table), `mtl_strip.md` (the table of each
 channel's profile: where it peaks and how wide it is at half its peak, measured (each
@@ -52,7 +68,7 @@ these summaries and the figure. The work folder `mtl_strip.work/` keeps the
 sensor file, the rig files and each case's fit and comparison; a finished case is
 read back on a re-run (a killed run resumes at the case it was in).
 
-Run: `.venv/bin/python experiments/mtl_strip.py --data PATH [--output DIR] [--depth 1.0] [--stages profile,fit]`.
+Run: `.venv/bin/python experiments/mtl_strip.py --data PATH [--output DIR] [--depth 1.0] [--stages profile,fit,estimate] [--events 400]`.
 """
 
 import argparse
@@ -229,7 +245,9 @@ def main() -> None:
     parser.add_argument("--data", type=Path, required=True, help="a checkout of the strip's repository, or a folder with design/ and logs/ laid out like it")
     parser.add_argument("--output", type=Path, default=Path(__file__).parent / "results")
     parser.add_argument("--depth", type=float, default=1.0, help="the simulated ball's depth into the skin, mm")
-    parser.add_argument("--stages", default="profile,fit", help="profile (the barometers' spatial profiles), fit (the material, full mode, with held-out logs)")
+    parser.add_argument("--stages", default="profile,fit,estimate",
+                        help="profile (the barometers' spatial profiles), fit (the material, full mode, with held-out logs), estimate (sim-to-real estimation; needs fit)")
+    parser.add_argument("--events", type=int, default=400, help="presses in the simulated strip dataset of the estimate stage")
     args = parser.parse_args()
     stages = set(args.stages.split(","))
     sys.path.insert(0, str(Path(__file__).parent))
@@ -284,8 +302,10 @@ def main() -> None:
         "profiles_Pa": {kind: values.tolist() for kind, values in profiles.items()},
         "table": rows,
     }
-    if "fit" in stages:
+    if "fit" in stages or "estimate" in stages:
         document["fit"] = fit_stage(work / f"{NAME}_sensor_pocket.json", logs, work, offset, args.output)
+    if "estimate" in stages:
+        document["estimate"] = estimate_stage(work / f"{NAME}_sensor_pocket.json", logs, work, offset, args.events)
     args.output.mkdir(parents=True, exist_ok=True)
     write_text_atomic(args.output / f"{NAME}.json", json.dumps(document, indent=1) + "\n")
     lines = ["| channel | port x (mm) | measured: peak x (vertex) / width (mm) | " + " | ".join(f"{kind}: peak x / width (mm), min / max (Pa)" for kind in MODELS) + " |",
@@ -296,6 +316,8 @@ def main() -> None:
         lines.append(f"| {row['channel']} | {row['port_x_mm']:.1f} | {shape} | " + " | ".join(cells) + " |")
     if "fit" in document:
         lines += ["", *fit_table(document["fit"])]
+    if "estimate" in document:
+        lines += ["", *estimate_table(document["estimate"])]
     write_text_atomic(args.output / f"{NAME}.md", "\n".join(lines) + "\n")
     _plot(document, measured, args.output / f"{NAME}.png")
     print(f"wrote {args.output / NAME}.{{json,md,png}}")
@@ -370,6 +392,117 @@ def fit_stage(spec_path: Path, logs: dict, work: Path, offset_mm: float, output:
             print(f"{group} {'whole' if left is None else 'without ' + left}: E_inf {report['long_term_modulus_Pa']['value'] / 1e6:.3f} MPa"
                   + (f", held out {case['compare_pooled_rms_Pa']:.0f} Pa pooled RMS" if left else ""), flush=True)
     return {"sensor": "pocket", "saturation_Pa": SATURATION_PA, "tare": "first:20", "gains": GAINS, "cases": cases}
+
+
+ESTIMATE_CONFIG = dict(targets=("x", "depth"), sequence_length=64, burn_in=32, batch_size=16, max_epochs=40, patience=8, seed=0)
+SIZES = (1, 3)  # real logs fine-tuned on (and trained on from scratch)
+TARE_S = 20.0
+
+
+def _tared(columns: dict, rest: np.ndarray) -> dict:
+    """A log's columns with each channel less its median over the first TARE_S s, plus `rest` (the simulation's resting level)."""
+    times = np.asarray(columns["time"])
+    first = times - times[0] <= TARE_S
+    out = dict(columns)
+    for c, channel in enumerate(CHANNELS):
+        values = np.asarray(columns[channel], dtype=np.float64)
+        out[channel] = values - np.median(values[first]) + rest[c]
+    return out
+
+
+def _split(block: dict, fraction: float = 0.75) -> tuple[dict, dict]:
+    cut = int(fraction * len(block["time"]))
+    return {k: np.asarray(v)[:cut] for k, v in block.items()}, {k: np.asarray(v)[cut:] for k, v in block.items()}
+
+
+def estimate_stage(spec_path: Path, logs: dict, work: Path, offset_mm: float, events: int) -> dict:
+    """The sim-to-real study (see the module, 4.); resumable: the dataset, the
+    pretrained model and each fold's numbers are kept in `work`."""
+    import dataclasses
+
+    import jax
+    from mtl_calibration import GROUPS
+
+    from hydrotact.data import read_log
+    from hydrotact.datasets import DatasetConfig, generate_dataset, load_dataset
+    from hydrotact.models import TrainConfig, evaluate_estimator, fine_tune_estimator, init_estimator, load_estimator, save_estimator, train_estimator
+    from hydrotact.sensors import load_sensor
+    from hydrotact.sysid import compare_fit
+
+    mapping = work / "mtl_mapping.json"
+    labelled = {}
+    for group, names in GROUPS.items():
+        folder = work / f"labels_{group}"
+        if not all((folder / f"{name}_labelled.parquet").is_file() for name in names):
+            compare_fit(work / f"fit_{GAINS}_{group}" / "fit", [logs[n] for n in names], folder, mapping=mapping, tare=f"first:{TARE_S:g}", labels=True)
+        for name in names:
+            labelled[name] = (group, read_log(folder / f"{name}_labelled.parquet"))
+    # The presses' x on the strip (stage x 0-19 mm plus the fitted offset), a millimetre past each end.
+    xs = np.concatenate([log.columns["contact_x"][np.isfinite(log.columns["contact_x"])] for _, log in labelled.values()])
+    span = (float(xs.min()) - 1e-3, float(xs.max()) + 1e-3)
+    dataset_folder = work / "strip_dataset"
+    config = DatasetConfig(
+        events=events, seed=0, probe=f"sphere:r={BALL_RADIUS_M * 1e3:g}mm", target="depth", depth_range=(0.2e-3, 2.5e-3), regime="stage",
+        stage_x_range=span, stage_y_range=(-0.3e-3, 0.3e-3), speed_range=(0.39e-3, 1.85e-3), hold_range=(0.0, 10.0), gap_range=(1.0, 4.0),
+        rate_hz=16.4, num_rays=16, split_blocks=10, test_fraction=0.2,
+    )
+    material = work / f"fit_{GAINS}_non-vacuum" / "fit" / "material.json"
+    if not (dataset_folder / "manifest.json").is_file():
+        start = time.perf_counter()
+        generate_dataset(str(spec_path), dataset_folder, material=material, config=config, progress=True)
+        (work / "strip_dataset_seconds.txt").write_text(f"{time.perf_counter() - start:.1f}\n")
+    dataset = load_dataset(dataset_folder)
+    sensor = load_sensor(spec_path)
+    train = dataset.arrays("train")
+    resting = np.asarray(train["contact"]) <= 0
+    rest = np.array([np.median(np.asarray(train[c])[resting]) for c in CHANNELS])
+    config_train = TrainConfig(**ESTIMATE_CONFIG)
+    pretrained_folder = work / "strip_pretrained"
+    if not (pretrained_folder / "model.json").is_file():
+        save_estimator(train_estimator(dataset, sensor, config_train, folder=pretrained_folder, progress=True), pretrained_folder, sensor.name)
+    pretrained = load_estimator(pretrained_folder)
+    rate = float(dataset.manifest["config"]["rate_hz"])
+    blocks = {name: _tared(log.columns, rest) for name, (_, log) in labelled.items()}
+    folds = []
+    for held in blocks:
+        path = work / f"estimate_without_{held}.json"
+        if path.is_file():
+            folds.append(json.loads(path.read_text()))
+            continue
+        group = labelled[held][0]
+        pool = sorted((n for n in blocks if n != held), key=lambda n: (labelled[n][0] != group, n))  # the held-out log's state first
+        score = lambda model, block=blocks[held]: {k: float(v) for k, v in evaluate_estimator(model, [block], rate)["metrics"].items()}
+        fold = {"held_out": held, "group": group, "simulation_only": score(pretrained), "runs": []}
+        for size in SIZES:
+            parts = [_split(blocks[n]) for n in pool[:size]]
+            tuned_config = dataclasses.replace(config_train, learning_rate=1e-3)
+            fresh = dataclasses.replace(pretrained, params=init_estimator(pretrained.spec, jax.random.PRNGKey(1)))
+            for kind, start in (("scratch", fresh), ("fine-tuned", pretrained)):
+                model = fine_tune_estimator(start, [p[0] for p in parts], [p[1] for p in parts], tuned_config if kind == "fine-tuned" else config_train)
+                fold["runs"].append({"kind": kind, "logs": pool[:size], "metrics": score(model), "epochs": len(model.history)})
+        write_text_atomic(path, json.dumps(fold, indent=1) + "\n")
+        folds.append(fold)
+        summary = ", ".join(f"{r['kind']} {len(r['logs'])}: x {1e3 * r['metrics']['x_rmse']:.2f} mm, depth {1e3 * r['metrics']['depth_rmse']:.2f} mm" for r in fold["runs"])
+        print(f"estimate without {held}: {summary}", flush=True)
+    return {"dataset": dataset.manifest["config"], "dataset_rows": dataset.num_rows, "train_config": config_train.to_json(),
+            "pretrained_validation": pretrained.history[pretrained.best_epoch]["validation_metrics"], "folds": folds}
+
+
+def estimate_table(estimate: dict) -> list:
+    """The estimate stage's table (markdown): per held-out log, x and depth RMSE (mm) of each model."""
+    kinds = [("simulation only", None, None)] + [(f"{kind} on {size}", kind, size) for size in SIZES for kind in ("scratch", "fine-tuned")]
+    lines = ["| held out | " + " | ".join(f"{label}: x / depth RMSE (mm)" for label, _, _ in kinds) + " |", "|---|" + "---|" * len(kinds)]
+    totals = {label: [] for label, _, _ in kinds}
+    for fold in estimate["folds"]:
+        cells = []
+        for label, kind, size in kinds:
+            metrics = fold["simulation_only"] if kind is None else next(r["metrics"] for r in fold["runs"] if r["kind"] == kind and len(r["logs"]) == size)
+            totals[label].append((metrics["x_rmse"], metrics["depth_rmse"]))
+            cells.append(f"{1e3 * metrics['x_rmse']:.2f} / {1e3 * metrics['depth_rmse']:.2f}")
+        lines.append(f"| {fold['held_out']} | " + " | ".join(cells) + " |")
+    lines.append("| RMS over the folds | " + " | ".join(
+        f"{1e3 * np.sqrt(np.mean(np.square([v[0] for v in totals[label]]))):.2f} / {1e3 * np.sqrt(np.mean(np.square([v[1] for v in totals[label]]))):.2f}" for label, _, _ in kinds) + " |")
+    return lines
 
 
 def _lumped_held_out(output: Path) -> dict:

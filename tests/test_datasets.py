@@ -161,12 +161,36 @@ def test_approach_thickness_is_the_elastomers_chord():
     np.testing.assert_allclose(plan.thickness[top], 4e-3 / np.cos(plan.tilts[top]), rtol=1e-9)
 
 
+def test_a_stage_presses_straight_down_on_the_up_facing_skin_within_its_ranges():
+    """The stage regime on pad5x5 (a 13.2 mm square pad, 4 mm thick): every approach
+    along -z, every point on the top face (z = 4 mm) within the x and y ranges, uniform
+    by area there (each coordinate uniform over its range), the thickness the pad's
+    4 mm; a range beside the pad is refused naming the option."""
+    spec = load_sensor("pad5x5")
+    skin = find_touchable_skin(spec, spec.make_mesh(check=False))
+    config = DatasetConfig(events=2000, regime="stage", target="depth", stage_x_range=(-5e-3, 3e-3), stage_y_range=(-1e-3, 1e-3))
+    plan = sample_events(skin, config, np.random.default_rng(11))
+    np.testing.assert_array_equal(plan.directions, np.tile([0.0, 0.0, -1.0], (2000, 1)))
+    np.testing.assert_allclose(plan.points[:, 2], 4e-3, atol=1e-12)
+    np.testing.assert_allclose(plan.tilts, 0.0, atol=1e-7)
+    np.testing.assert_allclose(plan.thickness, 4e-3, rtol=1e-9)
+    x, y = plan.points[:, 0], plan.points[:, 1]
+    assert x.min() >= -5e-3 and x.max() <= 3e-3 and y.min() >= -1e-3 and y.max() <= 1e-3
+    assert stats.kstest((x + 5e-3) / 8e-3, "uniform").pvalue > 1e-3 and stats.kstest((y + 1e-3) / 2e-3, "uniform").pvalue > 1e-3
+    assert np.all(np.isfinite(plan.target_depths)) and np.all(np.isnan(plan.target_forces))
+    with pytest.raises(HydrotactError, match="--regime stage: no skin face faces up .* within --stage-x-range"):
+        sample_events(skin, DatasetConfig(events=10, regime="stage", stage_x_range=(20e-3, 30e-3)), np.random.default_rng(0))
+    with pytest.raises(HydrotactError, match="--stage-x-range: only a stage"):
+        DatasetConfig(stage_x_range=(0.0, 1e-3))
+
+
 def test_config_refuses_impossible_regimes():
     for kwargs, words in (
         ({"events": 0}, "--events"), ({"force_range": (5.0, 1.0)}, "--force-range"), ({"force_range": (0.0, 8.0)}, "LOW > 0"),
         ({"gain_spread": 0.5}, "--gain-spread"), ({"max_tilt_deg": 95.0}, "--max-tilt-deg"), ({"force_distribution": "normal"}, "--force-distribution"),
         ({"speed_range": (0.5, 0.6), "max_depth": 1e-3}, "--speed-range"), ({"target": "torque"}, "--target"),
         ({"depth_range": (2e-3, 1e-3)}, "--depth-range"), ({"target": "depth", "depth_range": (0.0, 0.0)}, "HIGH > 0"),
+        ({"regime": "robot"}, "--regime"), ({"regime": "stage", "stage_y_range": (1e-3, -1e-3)}, "--stage-y-range"),
     ):
         with pytest.raises(HydrotactError, match=words):
             DatasetConfig(**kwargs)
@@ -400,7 +424,8 @@ def test_a_run_killed_and_resumed_on_four_devices_gives_the_same_bytes(reference
     process.wait()
     assert not (output / "manifest.json").exists()
     saved = sorted(path.name for path in (output / ".partial").glob("batch-*.npz"))
-    four = env | {"XLA_FLAGS": "--xla_force_host_platform_device_count=4"}
+    # Four devices on top of the compiler's own flags (`make test` compiles at -O0): the reference ran with them.
+    four = env | {"XLA_FLAGS": f"{env.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=4".strip()}
     finished = subprocess.run(_command(output, material_file), env=four, capture_output=True, text=True, timeout=900)
     assert finished.returncode == 0, finished.stderr
     assert json.loads(finished.stdout)["rounds"] > len(saved)  # batches were left for the four devices (a smoke round is one batch)

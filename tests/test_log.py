@@ -97,7 +97,7 @@ def test_known_columns_have_units_and_descriptions():
     for name, info in columns.items():
         assert info.get("unit") and info.get("description"), name
     # The angles, as labels and as an estimator's estimates, are NaN off contact.
-    assert {name for name, info in columns.items() if info.get("nan_allowed")} == {"theta", "phi", "est_theta", "est_phi"}
+    assert {name for name, info in columns.items() if info.get("nan_allowed")} == {"theta", "phi", "est_theta", "est_phi", "contact_x", "contact_y", "depth"}
 
 
 @pytest.mark.parametrize(

@@ -40,7 +40,7 @@ def _targets(rng, n):
     contact = (rng.random(n) < 0.6).astype(float)
     theta = np.where(contact > 0, rng.uniform(-0.7, 0.7, n), np.nan)
     phi = np.where(contact > 0, rng.uniform(-2.2, 0.7, n), np.nan)
-    return {"force": rng.normal(size=(n, 4)), "theta": theta, "phi": phi, "contact": contact, "mask": (rng.random(n) < 0.8).astype(float)}
+    return {"values": rng.normal(size=(n, 4)), "theta": theta, "phi": phi, "contact": contact, "mask": (rng.random(n) < 0.8).astype(float)}
 
 
 def test_loss_terms_equal_direct_sums():
@@ -51,7 +51,7 @@ def test_loss_terms_equal_direct_sums():
         t = _targets(rng, 200)
         terms = calc_loss_terms(spec, jnp.asarray(raw), {k: jnp.asarray(v) for k, v in t.items()})
         m = t["mask"] > 0
-        np.testing.assert_allclose(terms["force"], np.mean(np.mean((raw[:, :4] - t["force"]) ** 2, axis=1)[m]), rtol=1e-12)
+        np.testing.assert_allclose(terms["force"], np.mean(np.mean((raw[:, :4] - t["values"]) ** 2, axis=1)[m]), rtol=1e-12)
         p = 1 / (1 + np.exp(-raw[:, spec.outputs["contact"].start]))
         bce = -(t["contact"] * np.log(p) + (1 - t["contact"]) * np.log(1 - p))
         np.testing.assert_allclose(terms["contact"], bce[m].mean(), rtol=1e-10)
@@ -83,7 +83,7 @@ def test_table_metrics_of_a_perfect_estimate():
     spec = make_estimator_spec(load_sensor("sphere8"), "rnn", False)
     t = _targets(rng, 50)
     raw = np.zeros((50, spec.num_outputs))
-    raw[:, :4] = t["force"]
+    raw[:, :4] = t["values"]
     raw[:, 4], raw[:, 5] = np.nan_to_num(t["theta"]), np.nan_to_num(t["phi"])
     raw[:, 6] = np.where(t["contact"] > 0, 40.0, -40.0)
     metrics = calc_table_metrics(spec, jnp.asarray(raw), {k: jnp.asarray(v) for k, v in t.items()}, radius=0.01)
@@ -99,11 +99,11 @@ def test_sequences_with_burn_in_cover_each_label_once_and_windows_match_the_pape
         arrays[name] = rng.normal(size=n)
     norm = Normaliser.fit(np.column_stack([arrays["b0"], arrays["b1"]]))
     inputs, targets = make_sequences(arrays, ["b0", "b1"], norm, length=20, burn_in=8, dtype=np.float64)
-    labelled = targets["force"][targets["mask"] > 0][:, 0]
+    labelled = targets["values"][targets["mask"] > 0][:, 0]
     np.testing.assert_array_equal(np.sort(labelled), np.sort(arrays["fx"]))  # every label exactly once
     assert inputs.shape[1] == 28
     # No context crosses a block edge: the second block's first sequence starts with its own first sample.
-    second = np.flatnonzero(np.isclose(targets["force"][:, 8, 0], arrays["fx"][97]))[0]
+    second = np.flatnonzero(np.isclose(targets["values"][:, 8, 0], arrays["fx"][97]))[0]
     np.testing.assert_allclose(inputs[second, :9], np.repeat(norm(np.column_stack([arrays["b0"], arrays["b1"]]))[97:98], 9, axis=0))
     # The paper's windows: one label per 512-step history, the label last.
     inputs, targets = make_sequences(arrays, ["b0", "b1"], norm, length=1, burn_in=15, dtype=np.float64)
@@ -292,7 +292,7 @@ int main(void) {
   for (int t = 0; t < count; ++t) {
     for (int j = 0; j < HYDROTACT_NUM_INPUTS; ++j) if (scanf("%f", &readings[j]) != 1) return 1;
     hydrotact_step(&state, readings, &out);
-    printf("%.9g %.9g %.9g %.9g %.9g %.9g %.9g\n", out.force[0], out.force[1], out.force[2], out.force[3], out.theta, out.phi, out.contact);
+    printf("%.9g %.9g %.9g %.9g %.9g %.9g %.9g %.9g %.9g %.9g\n", out.force[0], out.force[1], out.force[2], out.force[3], out.x, out.y, out.depth, out.theta, out.phi, out.contact);
   }
   return 0;
 }
@@ -302,8 +302,6 @@ int main(void) {
 @pytest.mark.parametrize("variant", ["gru binned (trained)", "gru binned (trained), asinh inputs", "gru plain", "rnn binned", "mlp plain"])
 def test_the_c_export_compiles_and_matches_jax(tiny, trained, tmp_path, variant):
     import dataclasses
-    import shutil
-    import subprocess
 
     from hydrotact.models import init_estimator
 
@@ -316,24 +314,79 @@ def test_the_c_export_compiles_and_matches_jax(tiny, trained, tmp_path, variant)
         architecture, binned = variant.split()
         spec = make_estimator_spec(load_sensor("sphere8"), architecture, binned == "binned")
         model = dataclasses.replace(trained, spec=spec, params=init_estimator(spec, jax.random.PRNGKey(3)))
+    _check_c_export(model, tiny.blocks("test")[0], tmp_path)
+
+
+def _check_c_export(model, block, folder):
+    """Export `model`, compile the header with the system's C compiler, stream 400
+    samples of `block` through it: every output matches JAX to 1e-5 (NAN where the
+    model does not estimate it)."""
+    import shutil
+    import subprocess
+
     compiler = shutil.which("cc") or shutil.which("gcc")
     assert compiler, "no C compiler on this machine"
-    summary = export_c_header(model, tmp_path / "model.h", "sphere8")
+    summary = export_c_header(model, folder / "model.h", "sphere8")
     bins = model.spec.theta_bins.count + model.spec.phi_bins.count if model.spec.binned else 0
     normalisation = 5 * 8 + 1 if model.normaliser.scale is not None else 3 * 8  # mean (two parts), 1 / std; rest (two parts), 1 / scale
     assert summary["flash_bytes"] == 4 * (summary["parameters"] + normalisation + bins)
-    (tmp_path / "main.c").write_text(C_MAIN)
-    build = subprocess.run([compiler, "-std=c99", "-O2", "-Wall", "-Werror", "-o", str(tmp_path / "step"), str(tmp_path / "main.c"), "-lm"], capture_output=True, text=True, cwd=tmp_path)
+    (folder / "main.c").write_text(C_MAIN)
+    build = subprocess.run([compiler, "-std=c99", "-O2", "-Wall", "-Werror", "-o", str(folder / "step"), str(folder / "main.c"), "-lm"], capture_output=True, text=True, cwd=folder)
     assert build.returncode == 0, build.stderr
-    block = tiny.blocks("test")[0]
     readings = np.column_stack([block[name] for name in model.channels])[:400].astype(np.float32)
     text = f"{len(readings)}\n" + "\n".join(" ".join(f"{v!r}" for v in row.tolist()) for row in readings) + "\n"
-    run = subprocess.run([str(tmp_path / "step")], input=text, capture_output=True, text=True, timeout=60)
+    run = subprocess.run([str(folder / "step")], input=text, capture_output=True, text=True, timeout=60)
     assert run.returncode == 0, run.stderr
     c = np.loadtxt(run.stdout.splitlines())
     jax_out = predict_recording(model, readings.astype(np.float64))
-    expected = np.column_stack([jax_out[name] for name in ("fx", "fy", "fz", "fn", "theta", "phi", "contact_probability")])
+    missing = np.full(len(readings), np.nan)
+    expected = np.column_stack([jax_out.get(name, missing) for name in ("fx", "fy", "fz", "fn", "x", "y", "depth", "theta", "phi", "contact_probability")])
+    assert np.array_equal(np.isnan(c), np.isnan(expected))
     np.testing.assert_allclose(c, expected, rtol=1e-5, atol=1e-5)
+
+
+def test_position_and_depth_targets_train_save_load_stream_and_export(tiny, tmp_path):
+    """An estimator of the contact position and the indentation depth (the targets of
+    a strip pressed by a stage) besides the normal force: its loss terms are the direct
+    sums (z-scores of the training split's contact samples), it learns them (on the
+    training data, each RMSE under the constant predictor's), and it saves, loads,
+    streams and exports to C as the force estimator does."""
+    from hydrotact.models import init_estimator, load_estimator
+
+    sensor = load_sensor("sphere8")
+    config = TrainConfig(**(QUICK | {"targets": ("fn", "x", "y", "depth"), "restore_best": False, "max_epochs": 40}))
+    trained = train_estimator(tiny, sensor, config)
+    spec = trained.spec
+    assert spec.targets == ("fn", "x", "y", "depth") and list(spec.outputs)[:5] == ["fn", "x", "y", "depth", "theta"]
+    train = tiny.arrays("train")
+    touching = train["contact"] > 0
+    for k, column in enumerate(("cop_x", "cop_y", "depth")):
+        assert spec.offsets[k + 1] == pytest.approx(np.mean(train[column][touching]), rel=1e-12)
+        assert spec.scales[k + 1] == pytest.approx(np.std(train[column][touching]), rel=1e-12)
+    # The position term by hand: each target's mean squared z-score over its contact samples, averaged.
+    inputs, targets = make_sequences(train, trained.channels, trained.normaliser, 64, 32, targets=spec.targets)
+    raw = np.asarray(jax.vmap(lambda x: calc_estimator_sequence(spec, init_estimator(spec, jax.random.PRNGKey(1)), x)[1])(jnp.asarray(inputs)), dtype=np.float64)
+    counted = (targets["mask"] > 0) & (targets["contact"] > 0)
+    by_hand = np.mean([np.mean((raw[..., 1 + k][counted] - (targets["values"][..., 1 + k][counted] - spec.offsets[1 + k]) / spec.scales[1 + k]) ** 2) for k in range(3)])
+    terms = calc_loss(spec, jnp.asarray(raw), {k: jnp.asarray(v) for k, v in targets.items()})[1]
+    np.testing.assert_allclose(float(terms["position"]), by_hand, rtol=1e-5)
+    # It learns them: on the training blocks, each RMSE (m) under the constant predictor's.
+    metrics = evaluate_estimator(trained, tiny.blocks("train"), tiny.manifest["config"]["rate_hz"])["metrics"]
+    for name, column in (("x", "cop_x"), ("y", "cop_y"), ("depth", "depth")):
+        assert metrics[f"{name}_rmse"] < np.std(train[column][touching]), name
+    assert "fx_rmse" not in metrics
+    # Saved and loaded; streamed one sample at a time as batched; exported to C.
+    save_estimator(trained, tmp_path / "model", "sphere8")
+    loaded = load_estimator(tmp_path / "model")
+    assert loaded.spec == spec and loaded.config.targets == spec.targets
+    block = tiny.blocks("test")[0]
+    readings = np.column_stack([block[name] for name in loaded.channels])[:60]
+    batched = predict_recording(loaded, readings)
+    stream = StreamingEstimator(loaded)
+    streamed = [stream.update(row) for row in readings]
+    for name in ("fn", "x", "y", "depth", "theta", "phi", "contact_probability"):
+        np.testing.assert_allclose([row[name] for row in streamed], batched[name], rtol=1e-6, atol=1e-9, err_msg=name)
+    _check_c_export(loaded, block, tmp_path)
 
 
 def test_fine_tuning_a_pretrained_model_beats_training_from_scratch_on_a_few_recordings(trained, tmp_path):

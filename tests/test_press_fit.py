@@ -390,6 +390,9 @@ def test_fit_and_compare_from_the_command_line(stand_in, tmp_path, capsys):
         main(["compare", str(tmp_path / "fit"), str(stand_in["held_out"][0][0]), "--home", "guess", "-o", str(tmp_path / "bad")])
     assert exit_info.value.code == 2
     assert "--home" in capsys.readouterr().err and not (tmp_path / "bad").exists()
+    assert main(["compare", str(tmp_path / "fit"), str(stand_in["held_out"][0][0]), "--labels", "-o", str(tmp_path / "bad")]) == 2
+    err = capsys.readouterr().err
+    assert "--labels" in err and "not a fit through a rig" in err and "Traceback" not in err and not (tmp_path / "bad").exists()
     np.savez(tmp_path / "fit" / "channel_law_covariance.npz", qq=np.eye(3), qa=np.zeros((3, 3, 4)), aa=np.zeros((3, 4, 4)))
     assert main(["compare", str(tmp_path / "fit"), str(stand_in["held_out"][0][0]), "-o", str(tmp_path / "bad")]) == 2
     err = capsys.readouterr().err

@@ -13,10 +13,10 @@ import pytest
 from helpers import assert_one_line_error, run_main
 
 from hydrotact import HydrotactError
-from hydrotact.data import Rig, RigParameter, read_rig, write_log
+from hydrotact.data import LogWarning, Rig, RigParameter, read_log, read_rig, write_log
 from hydrotact.sim import StageSession, simulate_stage_log
 from hydrotact.sim._stage import FINGERTIP_SENSOR
-from hydrotact.sysid import fit_problem, make_fit_problem
+from hydrotact.sysid import fit_problem, label_rig_log, make_fit_problem
 from hydrotact.sysid._model import calc_residuals
 from hydrotact.visco import Prony
 
@@ -161,7 +161,7 @@ def test_the_command_line_fits_a_stage_log_and_predicts_a_held_out_one(stand_in,
     held_out.metadata["sensor"] = str(FINGERTIP_SENSOR)
     held_out.columns["stage_x"] = np.asarray(held_out.columns["stage_x"]) - SHIFT
     write_log(tmp_path / "held_out.parquet", held_out)
-    run = run_main(capsys, "compare", tmp_path / "fit", tmp_path / "held_out.parquet", "-o", tmp_path / "compare", "--json")
+    run = run_main(capsys, "compare", tmp_path / "fit", tmp_path / "held_out.parquet", "--labels", "-o", tmp_path / "compare", "--json")
     assert run.returncode == 0, run.stderr
     entry = json.loads(run.stdout)["logs"][0]
     held_home = float(held_truth["contact_z_m"].max()) + SESSION.clearance + held_truth["home_offset_m"]
@@ -170,6 +170,13 @@ def test_the_command_line_fits_a_stage_log_and_predicts_a_held_out_one(stand_in,
         assert numbers["rms_Pa"] < 2.0 * numbers["noise_Pa"], (name, numbers)
         assert numbers["r2"] > 0.99
     assert (tmp_path / "compare" / "held_out_predicted.parquet").is_file()
+    # The labels: the command's (a dataset's 0.1 N contact: the stand-in's presses reach 6 mN) and the function's at 1 mN.
+    with pytest.warns(LogWarning, match="uneven sampling"):  # the stand-in's 16 Hz clock jitters, as the strip's
+        written = read_log(tmp_path / "compare" / "held_out_labelled.parquet")
+    for name, values in label_rig_log(tmp_path / "fit", held_out, "held-out").columns.items():
+        np.testing.assert_array_equal(written.columns[name], values, err_msg=name)
+    _check_labels(label_rig_log(tmp_path / "fit", held_out, "held-out", contact_force=1e-3), held_out, held_truth, held_home)
+    assert_one_line_error(run_main(capsys, "compare", tmp_path / "fit", tmp_path / "held_out.parquet", "--labels", "--tare", "first:0", "-o", tmp_path / "c2"), "--tare")
     # a lumped fit has no sensor to place the probe on
     assert_one_line_error(run_main(capsys, "fit", path, "--rig", tmp_path / "rig.json", "--lumped", "-o", tmp_path / "f2"), "--rig", "--lumped")
     assert not (tmp_path / "f2").exists()
@@ -179,6 +186,29 @@ def test_the_command_line_fits_a_stage_log_and_predicts_a_held_out_one(stand_in,
     assert free.stderr.strip().splitlines()[-1].startswith("hydrotact: error: --gains free: no log has force columns")
     assert_one_line_error(run_main(capsys, "fit", path, "--lumped", "--gains", "relative", "-o", tmp_path / "f4"), "--gains", "--lumped")
     assert not (tmp_path / "f3").exists() and not (tmp_path / "f4").exists()
+
+
+def _check_labels(labelled, log, truth, home):
+    """The labels `compare --labels` wrote against the stand-in's truth: the log's own
+    columns unchanged; on contact samples the tip's x is the stage's plus the true
+    shift (10 µm: the fitted offset's error), and at the crown site, where the sphere
+    first touches straight below its tip, the depth is the true travel past the
+    touch (15 µm: the home's and the lag's errors); no contact label without the tip
+    below the skin, and one run of contact per press."""
+    for name, values in log.columns.items():
+        np.testing.assert_array_equal(labelled.columns[name], values)
+    contact = labelled.columns["contact"] > 0
+    times, travel = np.asarray(log.columns["time"]), np.asarray(log.columns["indentation"])
+    x, depth = labelled.columns["contact_x"], labelled.columns["depth"]
+    assert np.all(np.isnan(x[~contact])) and np.all(np.isnan(depth[~contact])) and np.all(np.isfinite(depth[contact]))
+    np.testing.assert_allclose(x[contact], np.asarray(log.columns["stage_x"])[contact] + SHIFT, atol=10e-6)
+    assert np.all(depth[contact] > 0.0)
+    crown = contact & (np.abs(np.asarray(log.columns["stage_x"]) + SHIFT) < 1e-9)
+    true_depth = truth["contact_z_m"][1] - (home - np.interp(times - truth["lag_s"], times, travel))
+    assert crown.sum() > 50
+    np.testing.assert_allclose(depth[crown], true_depth[crown], atol=15e-6)
+    runs = np.flatnonzero(np.diff(np.concatenate([[0], contact.astype(int), [0]])) == 1)
+    assert len(runs) == len(truth["presses"])
 
 
 RIG = {"format": "hydrotact.rig", "version": 1, "units": {"length": "mm"}, "probe": PROBE, "home": {"start": 5.0, "min": 4.0, "max": 6.0}}

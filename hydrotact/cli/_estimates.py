@@ -1,8 +1,5 @@
 """What evaluate and predict share: a model's recordings from datasets and logs."""
 
-ESTIMATES = ("fx", "fy", "fz", "fn", "theta", "phi")
-
-
 def recordings(model, sources, split: str):
     """(name, blocks, rate) per source: a dataset folder's split, or a log file (one block)."""
     from .._errors import HydrotactError

@@ -26,6 +26,11 @@ def add_parser(subparsers):
         help="the stage's home (the travel column's zero) differs between sessions: fit it to each log (default: one shift of every onset, or a rig fit's home), "
         "or use the fit's (its onsets; a rig fit's home for its own logs, else their mean)",
     )
+    parser.add_argument(
+        "--labels", action="store_true",
+        help="a rig fit only: also write each log with an estimator's labels (contact, contact_x, contact_y, depth: where the fitted rig "
+        "put the probe and the fitted model's force) as NAME_labelled.parquet, for hydrotact evaluate and fine-tuning",
+    )
     parser.add_argument("-o", "--output", required=True, type=Path, metavar="DIR", help="folder for compare.json, the predicted logs and plots")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
     return parser
@@ -35,7 +40,7 @@ def run(args) -> None:
     from ..sysid import compare_fit
     from ..viz import plot_comparisons
 
-    report = compare_fit(args.fit_dir, args.logs, args.output, mapping=args.mapping, tare=args.tare, home=args.home, plot=plot_comparisons)
+    report = compare_fit(args.fit_dir, args.logs, args.output, mapping=args.mapping, tare=args.tare, home=args.home, plot=plot_comparisons, labels=args.labels)
     if args.json:
         print(json.dumps(report, indent=2))
         return

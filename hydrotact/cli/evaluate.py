@@ -91,11 +91,15 @@ def _pictures(folder, stem, sensor, model, blocks, rate, result) -> list:
     first = max(0, int(touching[0]) - int(rate)) if len(touching) else 0
     window = slice(first, first + int(DETECTION_SECONDS * rate))
     times = block["time"] if "time" in block else np.arange(len(block["contact"])) / rate
-    force = np.linalg.norm(np.column_stack([block[k] for k in ("fx", "fy", "fz")]), axis=1)
-    estimate = np.linalg.norm(np.column_stack([predicted[k] for k in ("fx", "fy", "fz")]), axis=1)
+    forces = ("fx", "fy", "fz")
+    if all(k in block for k in forces):
+        signal, label = np.linalg.norm(np.column_stack([block[k] for k in forces]), axis=1), "|F| (N)"
+    else:  # a stage log labelled by its rig: no force, its depth
+        signal, label = 1e3 * np.nan_to_num(np.asarray(block.get("depth", np.zeros(len(times))), dtype=float)), "depth (mm)"
+    estimate = np.linalg.norm(np.column_stack([predicted[k] for k in forces]), axis=1)[window] if all(k in predicted for k in forces) else None
     plot_contact_detection(
-        np.asarray(times)[window], force[window], np.asarray(block["contact"])[window], predicted["contact_probability"][window], estimate[window],
-        folder / f"contact_detection_{stem}.png", threshold=CONTACT_FORCE, title=f"{stem}: contact detection",
+        np.asarray(times)[window], signal[window], np.asarray(block["contact"])[window], predicted["contact_probability"][window], estimate,
+        folder / f"contact_detection_{stem}.png", threshold=CONTACT_FORCE, title=f"{stem}: contact detection", signal=label,
     )
     written.append(str(folder / f"contact_detection_{stem}.png"))
     return written

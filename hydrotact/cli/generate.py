@@ -12,7 +12,7 @@ from ._output import print_report
 
 
 def add_parser(subparsers):
-    from ..datasets import FORCE_DISTRIBUTIONS, TARGETS, DatasetConfig
+    from ..datasets import FORCE_DISTRIBUTIONS, REGIMES, TARGETS, DatasetConfig
 
     d = DatasetConfig.__dataclass_fields__
     default = lambda name: d[name].default
@@ -41,7 +41,12 @@ def add_parser(subparsers):
         "--depth-range", type=number_pair, default=default("depth_range"), metavar="LOW,HIGH", help=f"target depth past the skin point with --target depth, m (default {pair('depth_range')})")
     parser.add_argument("--force-distribution", default=default("force_distribution"), choices=list(FORCE_DISTRIBUTIONS), help="target force law (default loguniform: low forces over-sampled)")
     parser.add_argument("--force-range", type=number_pair, default=default("force_range"), metavar="LOW,HIGH", help=f"target force along the approach, N (default {pair('force_range')})")
-    parser.add_argument("--max-tilt", type=number, default=default("max_tilt_deg"), metavar="DEG", help=f"largest angle between the approach and the skin normal (default {default('max_tilt_deg'):g})")
+    parser.add_argument("--max-tilt", type=number, metavar="DEG", help=f"largest angle between the approach and the skin normal (default {default('max_tilt_deg'):g}; not with --regime stage)")
+    parser.add_argument("--regime", choices=list(REGIMES), default=default("regime"),
+                        help="gantry (default, the paper's: anywhere on the skin, tilted approaches) or stage (straight down along -z on the skin that "
+                        "faces up, as a pressing stage over a strip or pad; with --target depth for a stage that sets its travel)")
+    parser.add_argument("--stage-x-range", type=number_pair, metavar="LOW,HIGH", help="where a stage's presses land along x, m in the sensor frame (default: the whole skin)")
+    parser.add_argument("--stage-y-range", type=number_pair, metavar="LOW,HIGH", help="where a stage's presses land along y, m (default: the whole skin)")
     parser.add_argument("--speed-range", type=number_pair, default=default("speed_range"), metavar="LOW,HIGH", help=f"approach and retract speed, m/s (default {pair('speed_range')})")
     parser.add_argument("--hold-range", type=number_pair, default=default("hold_range"), metavar="LOW,HIGH", help=f"hold duration, s (default {pair('hold_range')})")
     parser.add_argument("--gap-range", type=number_pair, default=default("gap_range"), metavar="LOW,HIGH", help=f"no-contact time before each event, s (default {pair('gap_range')})")
@@ -71,9 +76,12 @@ def run(args) -> None:
 
     if args.material is not None and args.modulus is not None:
         raise HydrotactError("--modulus: give either --material or --modulus, not both")
+    if args.regime == "stage" and args.max_tilt is not None:
+        raise HydrotactError("--max-tilt: a stage presses straight down (--regime stage); leave it out")
+    tilt = {} if args.max_tilt is None else {"max_tilt_deg": args.max_tilt}
     config = DatasetConfig(
         events=args.events, seed=args.seed, probe=args.probe, target=args.target, depth_range=args.depth_range, force_distribution=args.force_distribution, force_range=args.force_range,
-        max_tilt_deg=args.max_tilt, speed_range=args.speed_range, hold_range=args.hold_range, gap_range=args.gap_range,
+        **tilt, regime=args.regime, stage_x_range=args.stage_x_range, stage_y_range=args.stage_y_range, speed_range=args.speed_range, hold_range=args.hold_range, gap_range=args.gap_range,
         max_depth=args.max_depth, max_depth_fraction=args.max_depth_fraction,
         rate_hz=args.rate, num_rays=args.rays, noise_rms=args.noise, gain_spread=args.gain_spread, offset_spread=args.offset_spread,
         position_jitter=args.position_jitter, randomise_material=args.randomise_material, shard_rows=args.shard_rows, test_fraction=args.test_fraction,

@@ -3,7 +3,7 @@
 
 from pathlib import Path
 
-from ._estimates import ESTIMATES, log_block
+from ._estimates import log_block
 from ._output import print_report
 
 
@@ -11,7 +11,8 @@ def add_parser(subparsers):
     parser = subparsers.add_parser(
         "predict", help="run a trained estimator over a log one sample at a time, as on the sensor; writes the estimates as columns",
         description="Streams the log's readings through the estimator one sample at a time (the same numbers as a batched run) and "
-        "writes the log again with est_fx, est_fy, est_fz, est_fn, est_theta, est_phi and est_contact columns.",
+        "writes the log again with a column est_NAME per estimate (est_fx, est_fy, est_fz, est_fn by default; est_x, est_y, est_depth for "
+        "a model of those targets), est_theta and est_phi on a sensor with contact angles, and est_contact.",
     )
     parser.add_argument("model", type=Path, metavar="MODEL", help="a model folder from hydrotact train")
     parser.add_argument("log", type=Path, metavar="LOG", help="a log of absolute barometer readings (Parquet or CSV with its metadata)")
@@ -32,7 +33,8 @@ def run(args) -> None:
     readings = np.column_stack([columns[name] for name in model.channels])
     stream = StreamingEstimator(model)
     rows = [stream.update(reading) for reading in readings]
-    estimates = {f"est_{name}": np.array([row.get(name, np.nan) for row in rows]) for name in ESTIMATES}
+    names = (*model.spec.targets, *(("theta", "phi") if model.spec.angles else ()))
+    estimates = {f"est_{name}": np.array([row[name] for row in rows]) for name in names}
     estimates["est_contact"] = np.array([row["contact_probability"] for row in rows])
     write_log(args.output, BarometerLog(log.metadata, dict(log.columns) | estimates))
     print_report("estimates", {"log": str(args.output), "samples": len(rows), "contact_fraction": float(np.mean(estimates["est_contact"] > 0.5))}, args.json)

@@ -20,6 +20,18 @@ def _sizes(text: str) -> tuple:
     return sizes
 
 
+def _names(text: str) -> tuple:
+    import argparse
+
+    from ..models import REGRESSION_TARGETS
+
+    names = tuple(part.strip() for part in text.split(",") if part.strip())
+    unknown = [name for name in names if name not in REGRESSION_TARGETS]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"{unknown[0] if unknown else text!r}: targets are names separated by commas, of {', '.join(REGRESSION_TARGETS)}")
+    return names
+
+
 def add_parser(subparsers):
     from ..models import ARCHITECTURES, SCHEDULES, TrainConfig
 
@@ -33,6 +45,9 @@ def add_parser(subparsers):
     )
     parser.add_argument("dataset", type=Path, metavar="DATASET", help="a dataset folder from hydrotact generate")
     parser.add_argument("--architecture", choices=ARCHITECTURES, default=default("architecture"), help=f"the estimator (default {default('architecture')}: two GRU layers)")
+    parser.add_argument("--targets", type=_names, default=default("targets"), metavar="T1,T2",
+                        help="what it estimates besides contact (and the angles on a sensor with them): fx, fy, fz, fn (N), the contact position x, y "
+                        "and the indentation depth (m), from the dataset's columns (default fx,fy,fz,fn; e.g. x,depth for a strip pressed by a stage)")
     parser.add_argument("--plain", action="store_true", help="regress the contact angles instead of classifying them into pi/16 bins")
     parser.add_argument("--hidden", type=_sizes, metavar="H1,H2", help="hidden sizes (default: the GRU's largest two equal layers within 6000 parameters; the paper's sizes for rnn and mlp)")
     parser.add_argument("--cover", choices=("whole", "floor"), default=default("cover"), help="angle bins cover the whole ranges, or the paper's floor count (default whole)")
@@ -63,7 +78,7 @@ def run(args) -> None:
         architecture=args.architecture, binned=not args.plain, hidden=args.hidden, cover=args.cover, sequence_length=args.sequence_length,
         burn_in=args.burn_in, batch_size=args.batch_size, learning_rate=args.learning_rate, schedule=args.schedule,
         max_epochs=args.max_epochs, patience=args.patience, restore_best=not args.last_epoch, seed=args.seed,
-        asinh_scale=args.asinh_scale,
+        asinh_scale=args.asinh_scale, targets=args.targets,
     )
     dataset = load_dataset(args.dataset)
     sensor = load_sensor(dataset.manifest["sensor"]["spec"])
@@ -79,7 +94,7 @@ def run(args) -> None:
     best = trained.history[trained.best_epoch]
     report = {
         "model": str(path), "sensor": sensor.name, "architecture": trained.spec.architecture, "hidden": ",".join(map(str, trained.spec.hidden)),
-        "binned": trained.spec.binned, "parameters": count_parameters(trained.spec), "macs_per_step": count_macs(trained.spec),
+        "targets": ",".join(trained.spec.targets), "binned": trained.spec.binned, "parameters": count_parameters(trained.spec), "macs_per_step": count_macs(trained.spec),
         "epochs": len(trained.history), "best_epoch": trained.best_epoch, "stopped": trained.stopped,
         "validation_loss": best["validation_loss"], **{f"validation_{k}": v for k, v in best["validation_metrics"].items()},
         "seconds": sum(entry["seconds"] for entry in trained.history), "plots": ", ".join(map(str, plots)) or "none",

@@ -11,7 +11,7 @@ responses on local devices or Ray tasks).
 """
 
 from ._compute import PoseEngine as PoseEngine, compute_block as compute_block
-from ._config import FORCE_DISTRIBUTIONS as FORCE_DISTRIBUTIONS, PHASES as PHASES, TARGETS as TARGETS, DatasetConfig as DatasetConfig
+from ._config import FORCE_DISTRIBUTIONS as FORCE_DISTRIBUTIONS, PHASES as PHASES, REGIMES as REGIMES, TARGETS as TARGETS, DatasetConfig as DatasetConfig
 from ._events import (
     EventPlan as EventPlan,
     Skin as Skin,
@@ -22,6 +22,7 @@ from ._events import (
     pressing_rotation_vectors as pressing_rotation_vectors,
     sample_events as sample_events,
     sample_skin_points as sample_skin_points,
+    sample_stage_points as sample_stage_points,
 )
 from ._generate import GENERATOR as GENERATOR, PUBLISHED_CHANNEL_STD_PA as PUBLISHED_CHANNEL_STD_PA, draw_material as draw_material, generate_dataset as generate_dataset
 from ._session import Presses as Presses, Timeline as Timeline, lay_out_timeline as lay_out_timeline, march_presses as march_presses, run_session as run_session

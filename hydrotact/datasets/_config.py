@@ -31,6 +31,18 @@ the skin: with depths, a stiffer material, or a press where the elastomer is thi
 moves the forces (on sphere8 one depth gives forces a tenfold apart over the skin),
 and the paper gives its depths only as "roughly 0-8 N"."""
 
+REGIMES = ("gantry", "stage")
+"""Where and how events press: `gantry` (the default, the barometric estimation
+paper's: points uniform by area over the whole touchable skin, each approach along the
+inward skin normal tilted by up to `max_tilt_deg`), or `stage` (a pressing stage over a
+strip or pad, as in stage logs: straight down along the sensor's −z, at points uniform
+by area over the skin faces that face up (outward normal within 8° of +z), within
+`stage_x_range` and `stage_y_range` where given; no tilt)."""
+
+STAGE_FACE_COS = float(np.cos(np.radians(8.0)))
+"""A skin face faces up (the stage regime presses it) when its outward normal's z is at
+least this (within 8° of +z: a moulded strip's flat skin, not its rounded edges)."""
+
 PHASES = {"gap": 0, "approach": 1, "hold": 2, "retract": 3}
 """The `phase` label's codes: no contact between events, approach, hold, retract."""
 
@@ -58,6 +70,11 @@ class DatasetConfig:
     `max_depth` (m) nor than `max_depth_fraction` of the elastomer's thickness along
     its line (an event whose target force is not reached by then holds there, and is
     counted in the manifest); `rate_hz` the sample rate.
+
+    **The rig:** `regime` (:data:`REGIMES`): "gantry" (the paper's, above) or
+    "stage" (straight-down presses over the up-facing skin, `max_tilt_deg` unused);
+    `stage_x_range`, `stage_y_range` (m, frame S; None: the whole skin) where a stage's
+    presses may land.
 
     **The sensor:** `num_rays` per receptive field; `noise_rms` the barometer noise
     (None: the part's); `gain_spread`, `offset_spread` (Pa) the channels' gains and
@@ -94,6 +111,9 @@ class DatasetConfig:
     shard_rows: int = 100_000
     test_fraction: float = 0.3
     split_blocks: int = 10
+    regime: str = "gantry"
+    stage_x_range: tuple[float, float] | None = None
+    stage_y_range: tuple[float, float] | None = None
 
     def __post_init__(self):
         check_config(self)
@@ -135,6 +155,13 @@ def check_config(config: DatasetConfig) -> None:
     whole("num_rays", 1, 4096)
     whole("shard_rows", 100)
     whole("split_blocks", 2)
+    if config.regime not in REGIMES:
+        raise HydrotactError(f"--regime: {config.regime!r} is not one of {', '.join(REGIMES)}")
+    for name in ("stage_x_range", "stage_y_range"):
+        if getattr(config, name) is not None:
+            if config.regime != "stage":
+                raise HydrotactError(f"{_option(name)}: only a stage presses within a range (--regime stage)")
+            _check_range(config, name, -1.0, 1.0, "m")
     if config.target not in TARGETS:
         raise HydrotactError(f"--target: {config.target!r} is not one of {', '.join(TARGETS)}")
     _check_range(config, "depth_range", 0.0, 0.05, "m")

@@ -5,7 +5,8 @@ faces whose centroids lie within the sensor's contact-angle ranges where it defi
 them (seen from its contact centre), every free face otherwise. A face is drawn with
 probability proportional to its area, then a point uniformly inside it. Uniform in
 (θ, φ) would crowd the poles of a sphere; uniform by area is what a gantry that picks
-"random places on the skin" does.
+"random places on the skin" does. A stage (the `stage` regime) presses straight down
+on the skin faces that face up, within its x and y ranges.
 """
 
 import dataclasses
@@ -14,7 +15,7 @@ import numpy as np
 
 from .._errors import HydrotactError
 from ..mesh import FREE
-from ._config import DatasetConfig
+from ._config import STAGE_FACE_COS, DatasetConfig
 
 
 @dataclasses.dataclass(frozen=True)
@@ -155,11 +156,54 @@ def draw_hold_targets(config: DatasetConfig, count: int, rng: np.random.Generato
     return draw_target_forces(config, count, rng), nothing
 
 
+def stage_skin(skin: Skin, config: DatasetConfig) -> Skin:
+    """The part of `skin` a stage presses: the faces that face up (:data:`STAGE_FACE_COS`)
+    with a corner inside the configured x and y ranges (their points are then kept
+    inside the ranges by :func:`sample_stage_points`); an error naming the option when
+    none is left."""
+    keep = skin.normals[:, 2] >= STAGE_FACE_COS
+    for axis, name in ((0, "stage_x_range"), (1, "stage_y_range")):
+        span = getattr(config, name)
+        if span is not None:
+            low, high = skin.corners[:, :, axis].min(axis=1), skin.corners[:, :, axis].max(axis=1)
+            keep &= (high >= span[0]) & (low <= span[1])
+    if not keep.any():
+        extent = np.ptp(skin.corners.reshape(-1, 3), axis=0)
+        raise HydrotactError(
+            "--regime stage: no skin face faces up (+z)" + ("" if config.stage_x_range is None and config.stage_y_range is None else " within --stage-x-range and --stage-y-range")
+            + f" (the skin spans {1e3 * extent[0]:.1f} x {1e3 * extent[1]:.1f} mm in x and y); a stage presses straight down"
+        )
+    return dataclasses.replace(skin, corners=skin.corners[keep], normals=skin.normals[keep], areas=skin.areas[keep])
+
+
+def sample_stage_points(skin: Skin, config: DatasetConfig, count: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """`count` points uniform by area over the up-facing skin within the stage's
+    ranges (drawn on its faces, those outside the ranges drawn again; at most 200
+    rounds): (points (n, 3), the faces' outward normals (n, 3))."""
+    skin = stage_skin(skin, config)
+    points, normals = np.empty((0, 3)), np.empty((0, 3))
+    for _ in range(200):
+        drawn, drawn_normals, _ = sample_skin_points(skin, count, rng)
+        inside = np.ones(count, bool)
+        for axis, name in ((0, "stage_x_range"), (1, "stage_y_range")):
+            span = getattr(config, name)
+            if span is not None:
+                inside &= (span[0] <= drawn[:, axis]) & (drawn[:, axis] <= span[1])
+        points, normals = np.vstack([points, drawn[inside]]), np.vstack([normals, drawn_normals[inside]])
+        if len(points) >= count:
+            return points[:count], normals[:count]
+    raise HydrotactError("--stage-x-range, --stage-y-range: too little up-facing skin lies inside them to draw the events from")
+
+
 def sample_events(skin: Skin, config: DatasetConfig, rng: np.random.Generator) -> EventPlan:
     """Draw `config.events` events (see :class:`EventPlan`), in a fixed order of draws."""
     count = config.events
-    points, normals, _ = sample_skin_points(skin, count, rng)
-    directions, tilts = _tilt(-normals, np.radians(config.max_tilt_deg), rng)
+    if config.regime == "stage":
+        points, normals = sample_stage_points(skin, config, count, rng)
+        directions, tilts = np.tile([0.0, 0.0, -1.0], (count, 1)), np.arccos(np.clip(normals[:, 2], -1.0, 1.0))
+    else:
+        points, normals, _ = sample_skin_points(skin, count, rng)
+        directions, tilts = _tilt(-normals, np.radians(config.max_tilt_deg), rng)
     thickness = calc_approach_thickness(skin, points, directions)
     forces, depths = draw_hold_targets(config, count, rng)
     return EventPlan(

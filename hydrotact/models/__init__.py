@@ -8,15 +8,19 @@ from ._cells import calc_gru_step as calc_gru_step, calc_linear as calc_linear, 
 from ._estimator import (
     ARCHITECTURES as ARCHITECTURES,
     DEFAULT_HIDDEN as DEFAULT_HIDDEN,
+    LABEL_COLUMNS as LABEL_COLUMNS,
     PARAMETER_BUDGET as PARAMETER_BUDGET,
+    REGRESSION_TARGETS as REGRESSION_TARGETS,
     EstimatorSpec as EstimatorSpec,
     calc_estimator_sequence as calc_estimator_sequence,
     calc_estimator_step as calc_estimator_step,
+    calc_target_scaling as calc_target_scaling,
     check_budget as check_budget,
     count_macs as count_macs,
     count_parameters as count_parameters,
     decode_estimator_outputs as decode_estimator_outputs,
     init_estimator as init_estimator,
+    label_column as label_column,
     make_estimator_spec as make_estimator_spec,
     make_initial_state as make_initial_state,
 )
@@ -32,7 +36,7 @@ from ._evaluate import (
 from ._export import export_c_header as export_c_header
 from ._loss import DEFAULT_WEIGHTS as DEFAULT_WEIGHTS, calc_arc_length as calc_arc_length, calc_loss as calc_loss, calc_loss_terms as calc_loss_terms, calc_table_metrics as calc_table_metrics
 from ._saved import load_estimator as load_estimator, save_estimator as save_estimator
-from ._sequences import Normaliser as Normaliser, make_sequences as make_sequences
+from ._sequences import Normaliser as Normaliser, make_sequences as make_sequences, target_labels as target_labels
 from ._train import (
     SCHEDULES as SCHEDULES,
     TrainConfig as TrainConfig,

@@ -2,9 +2,14 @@
 MLPs, each with binned or plain angle heads (pure JAX; parameters a plain pytree).
 
 An estimator reads one sample of the barometers (normalised per channel) per step and
-outputs, per step, one vector laid out as :attr:`EstimatorSpec.outputs` says:
-Fx, Fy, Fz, Fn (regression, N); then, on a sensor with contact angles, θ and φ (two
-values, rad) or their bin logits (binned); then the contact logit. The recurrent ones
+outputs, per step, one vector laid out as :attr:`EstimatorSpec.outputs` says: its
+regression targets (:attr:`EstimatorSpec.targets`; by default Fx, Fy, Fz, Fn in N, the
+paper's; any of :data:`REGRESSION_TARGETS`: also the contact position x, y along a strip
+or pad and the indentation depth, in m); then, on a sensor with contact angles, θ and
+φ (two values, rad) or their bin logits (binned); then the contact logit. A force is
+output in N as it is; a position or depth as a z-score of the training split's contact
+samples (its offset and scale are part of the spec), so that a millimetre and a newton
+weigh alike in the loss whatever a sensor's size. The recurrent ones
 carry a hidden state per layer from step to step; the MLP sees the current sample only.
 
 The published models (barometric estimation paper, from the authors' repository), in
@@ -28,6 +33,7 @@ import math
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import lax
 
 from ._bins import AngleBins, decode_bins, make_angle_bins
@@ -40,14 +46,32 @@ PARAMETER_BUDGET = 6000
 DEFAULT_HIDDEN = {("rnn", True): (48,), ("rnn", False): (48,), ("mlp", True): (12, 24, 64), ("mlp", False): (12, 64, 64)}
 """The paper's hidden sizes; the GRU's default is sized to the budget (two equal layers)."""
 FORCES = ("fx", "fy", "fz", "fn")
+POSITIONS = ("x", "y", "depth")
+REGRESSION_TARGETS = FORCES + POSITIONS
+"""What an estimator may regress: the force on the sensor in S (`fx`, `fy`, `fz`) and
+along the inward skin normal (`fn`), N, on every sample (0 without contact); the
+contact position in S (`x`, `y`: the centre of pressure, or a stage's probe position
+on a flat strip or pad) and the indentation `depth` past the skin, m, on contact
+samples only (undefined without contact)."""
+LABEL_COLUMNS = {"fx": ("fx",), "fy": ("fy",), "fz": ("fz",), "fn": ("fn",), "x": ("cop_x", "contact_x"), "y": ("cop_y", "contact_y"), "depth": ("depth",)}
+"""Where each target's label is read: a dataset's column (`cop_x`, ...), else a log's
+(`contact_x`, ...), the first present."""
+
+
+def label_column(target: str, columns) -> str | None:
+    """The column of `columns` (names) holding `target`'s label, or None."""
+    return next((name for name in LABEL_COLUMNS[target] if name in columns), None)
 
 
 @dataclasses.dataclass(frozen=True)
 class EstimatorSpec:
     """What an estimator is (static, hashable): `architecture` ("gru", "rnn", "mlp"),
     `hidden` sizes (one per recurrent layer, or the MLP's hidden layers),
-    `num_inputs` (barometers), `angles` (whether the sensor has θ, φ), and the
-    angle bins (`theta_bins`, `phi_bins`: AngleBins for binned heads, None for plain)."""
+    `num_inputs` (barometers), `angles` (whether the sensor has θ, φ), the
+    angle bins (`theta_bins`, `phi_bins`: AngleBins for binned heads, None for plain),
+    the regression `targets` (names from :data:`REGRESSION_TARGETS`, in output order)
+    and each one's `target_offsets` and `target_scales` (a target is output as
+    (value - offset) / scale; empty: 0 and 1 for every target, values as they are)."""
 
     architecture: str
     hidden: tuple
@@ -55,6 +79,9 @@ class EstimatorSpec:
     angles: bool = True
     theta_bins: AngleBins | None = None
     phi_bins: AngleBins | None = None
+    targets: tuple = FORCES
+    target_offsets: tuple = ()
+    target_scales: tuple = ()
 
     def __post_init__(self):
         if self.architecture not in ARCHITECTURES:
@@ -63,6 +90,21 @@ class EstimatorSpec:
             raise ValueError(f"hidden sizes and inputs must be positive, got {self.hidden!r}, {self.num_inputs!r}")
         if (self.theta_bins is None) != (self.phi_bins is None) or (self.theta_bins is not None and not self.angles):
             raise ValueError("binned heads need both θ and φ bins, on a sensor with contact angles")
+        check_targets(self.targets)
+        for name in ("target_offsets", "target_scales"):
+            values = getattr(self, name)
+            if values and (len(values) != len(self.targets) or not all(math.isfinite(v) for v in values)):
+                raise ValueError(f"{name}: one finite number per target ({len(self.targets)}), got {values!r}")
+        if self.target_scales and min(self.target_scales) <= 0.0:
+            raise ValueError(f"target_scales must be positive, got {self.target_scales!r}")
+
+    @property
+    def offsets(self) -> tuple:
+        return self.target_offsets or (0.0,) * len(self.targets)
+
+    @property
+    def scales(self) -> tuple:
+        return self.target_scales or (1.0,) * len(self.targets)
 
     @property
     def binned(self) -> bool:
@@ -71,7 +113,7 @@ class EstimatorSpec:
     @property
     def outputs(self) -> dict:
         """The output vector's layout: name -> slice."""
-        sizes = {name: 1 for name in FORCES}
+        sizes = {name: 1 for name in self.targets}
         if self.angles:
             sizes |= {"theta": self.theta_bins.count, "phi": self.phi_bins.count} if self.binned else {"theta": 1, "phi": 1}
         sizes["contact"] = 1
@@ -94,25 +136,66 @@ class EstimatorSpec:
             "architecture": self.architecture, "hidden": list(self.hidden), "num_inputs": self.num_inputs, "angles": self.angles,
             "theta_bins": None if self.theta_bins is None else self.theta_bins.to_json(),
             "phi_bins": None if self.phi_bins is None else self.phi_bins.to_json(),
+            "targets": list(self.targets), "target_offsets": list(self.offsets), "target_scales": list(self.scales),
         }
 
     @classmethod
     def from_json(cls, document: dict) -> "EstimatorSpec":
+        """From :meth:`to_json` (a model saved before targets were configurable regresses the four forces)."""
         bins = lambda entry: None if entry is None else AngleBins(**entry)
-        return cls(document["architecture"], tuple(document["hidden"]), int(document["num_inputs"]), bool(document["angles"]), bins(document["theta_bins"]), bins(document["phi_bins"]))
+        targets = tuple(document.get("targets", FORCES))
+        offsets, scales = (tuple(float(v) for v in document.get(key, ())) for key in ("target_offsets", "target_scales"))
+        if offsets == (0.0,) * len(targets) and scales == (1.0,) * len(targets):
+            offsets = scales = ()
+        return cls(document["architecture"], tuple(document["hidden"]), int(document["num_inputs"]), bool(document["angles"]), bins(document["theta_bins"]), bins(document["phi_bins"]),
+                   targets, offsets, scales)
 
 
-def make_estimator_spec(sensor, architecture: str = "gru", binned: bool = True, hidden=None, cover: str = "whole") -> EstimatorSpec:
+def check_targets(targets) -> tuple:
+    """`targets` as a tuple of known, distinct regression targets; a ValueError otherwise."""
+    targets = tuple(targets)
+    unknown = [name for name in targets if name not in REGRESSION_TARGETS]
+    if unknown:
+        raise ValueError(f"unknown target {unknown[0]!r}: use {', '.join(REGRESSION_TARGETS)}")
+    if len(set(targets)) != len(targets):
+        raise ValueError(f"a target named twice in {', '.join(targets)}")
+    return targets
+
+
+def calc_target_scaling(arrays: dict, targets, contact=None) -> tuple[tuple, tuple]:
+    """Each target's (offsets, scales) from training labels `arrays` (name -> column,
+    through :data:`LABEL_COLUMNS`): forces 0 and 1 N (as the paper's); a position or
+    depth the mean and standard deviation of its finite labels on contact samples
+    (`contact` (N,) flags; a spread under 0.1 mm counts as 0.1 mm). Empty tuples when
+    every target is a force."""
+    if all(name in FORCES for name in targets):
+        return (), ()
+    offsets, scales = [], []
+    for name in targets:
+        if name in FORCES:
+            offsets.append(0.0), scales.append(1.0)
+            continue
+        values = np.asarray(arrays[label_column(name, arrays)], dtype=np.float64)
+        counted = np.isfinite(values) & (np.ones(len(values), bool) if contact is None else np.asarray(contact) > 0)
+        if not counted.any():
+            raise ValueError(f"target {name!r}: no finite label on a contact sample to scale it by")
+        offsets.append(float(np.mean(values[counted]))), scales.append(max(float(np.std(values[counted])), 1e-4))
+    return tuple(offsets), tuple(scales)
+
+
+def make_estimator_spec(sensor, architecture: str = "gru", binned: bool = True, hidden=None, cover: str = "whole", targets=FORCES, scaling=((), ())) -> EstimatorSpec:
     """An estimator for a sensor (a :class:`hydrotact.sensors.SensorSpec`): its
-    barometers in, angle heads over its contact-angle ranges (none without them; π/16
-    bins covering the whole ranges, or the paper's count with `cover="floor"`).
-    `hidden` defaults to :data:`DEFAULT_HIDDEN`, and for the GRU to the largest two
-    equal layers within :data:`PARAMETER_BUDGET`."""
+    barometers in, the regression `targets` (with their `scaling`, (offsets, scales),
+    from :func:`calc_target_scaling`), angle heads over its contact-angle ranges (none
+    without them; π/16 bins covering the whole ranges, or the paper's count with
+    `cover="floor"`). `hidden` defaults to :data:`DEFAULT_HIDDEN`, and for the GRU to
+    the largest two equal layers within :data:`PARAMETER_BUDGET`."""
     angles = sensor.theta_range is not None and sensor.phi_range is not None
     theta_bins = phi_bins = None
     if binned and angles:
         theta_bins, phi_bins = make_angle_bins(*sensor.theta_range, cover=cover), make_angle_bins(*sensor.phi_range, cover=cover)
-    make = lambda sizes: EstimatorSpec(architecture, tuple(int(h) for h in sizes), int(sensor.num_taxels), angles, theta_bins, phi_bins)
+    targets = check_targets(targets)
+    make = lambda sizes: EstimatorSpec(architecture, tuple(int(h) for h in sizes), int(sensor.num_taxels), angles, theta_bins, phi_bins, targets, *scaling)
     if hidden is not None:
         return make(hidden)
     if architecture == "gru":
@@ -163,10 +246,16 @@ def calc_estimator_sequence(spec: EstimatorSpec, params: dict, inputs, state: tu
 
 
 def decode_estimator_outputs(spec: EstimatorSpec, raw) -> dict:
-    """The estimates from raw outputs (..., num_outputs): `force` (..., 4) Fx, Fy, Fz,
-    Fn (N); `theta`, `phi` (rad; Eq. 1 when binned); `contact_probability`."""
+    """The estimates from raw outputs (..., num_outputs): each regression target by
+    name (N or m), and `force` (..., 4) Fx, Fy, Fz, Fn (N) where all four are targets;
+    `theta`, `phi` (rad; Eq. 1 when binned); `contact_probability`."""
     layout = spec.outputs
-    out = {"force": raw[..., : len(FORCES)], "contact_probability": jax.nn.sigmoid(raw[..., layout["contact"].start])}
+    out = {"contact_probability": jax.nn.sigmoid(raw[..., layout["contact"].start])}
+    for name, offset, scale in zip(spec.targets, spec.offsets, spec.scales):
+        value = raw[..., layout[name].start]
+        out[name] = value if (offset, scale) == (0.0, 1.0) else value * scale + offset
+    if all(name in spec.targets for name in FORCES):
+        out["force"] = jnp.stack([out[name] for name in FORCES], axis=-1)
     if spec.angles:
         if spec.binned:
             out["theta"] = decode_bins(spec.theta_bins, raw[..., layout["theta"]])

@@ -15,9 +15,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._bins import BIN_WIDTH
-from ._estimator import calc_estimator_sequence, calc_estimator_step, decode_estimator_outputs, make_initial_state
+from ._estimator import FORCES, calc_estimator_sequence, calc_estimator_step, decode_estimator_outputs, make_initial_state
 from ._loss import calc_arc_length, calc_table_metrics
-from ._sequences import FORCE_COLUMNS
+from ._sequences import target_labels
 
 CONTACT_FORCE = 0.1
 """N: the contact flag's threshold on |F| (the datasets' label), also used to turn a
@@ -25,15 +25,14 @@ predicted force into a contact detector."""
 
 
 def _decoded(spec, raw) -> dict:
-    out = {name: np.asarray(value) for name, value in decode_estimator_outputs(spec, raw).items()}
-    force = out.pop("force")
-    return {name: force[..., k] for k, name in enumerate(FORCE_COLUMNS)} | out
+    return {name: np.asarray(value) for name, value in decode_estimator_outputs(spec, raw).items() if name != "force"}
 
 
 def predict_recording(trained, readings) -> dict:
     """Estimates for a recording `readings` (T, channels) in Pa, in the model's channel
-    order, from the zero state: fx, fy, fz, fn (N), theta, phi (rad; sensors with
-    contact angles), contact_probability; each (T,)."""
+    order, from the zero state: its regression targets (fx, fy, fz, fn in N by
+    default; x, y, depth in m), theta, phi (rad; sensors with contact angles),
+    contact_probability; each (T,)."""
     inputs = jnp.asarray(trained.normaliser(np.asarray(readings, dtype=np.float64)), dtype=jnp.float32)
     _, raw = _run(trained.spec, trained.params, inputs)
     return _decoded(trained.spec, raw)
@@ -109,16 +108,18 @@ def calc_detection(truth: np.ndarray, detected: np.ndarray, rate_hz: float) -> d
 
 def evaluate_estimator(trained, blocks: list, rate_hz: float, radius: float | None = None) -> dict:
     """The paper's evaluation over recordings (`blocks`: dicts of columns, each run
-    from the zero state, every sample counted): Table I's metrics (RMSE of fx, fy, fz,
-    fn in N, of theta and phi in rad over contact samples, contact BCE), the mean
-    arc-length error (m, with the sensor's `radius`), and two contact detectors (the
-    predicted probability above 0.5; the predicted |F| above :data:`CONTACT_FORCE`).
+    from the zero state, every sample counted): Table I's metrics (RMSE of each
+    regression target: forces in N over every sample, positions and depth in m over
+    contact samples; of theta and phi in rad over contact samples; contact BCE), the
+    mean arc-length error (m, with the sensor's `radius`), and the contact detectors
+    (the predicted probability above 0.5; with fx, fy, fz among the targets, the
+    predicted |F| above :data:`CONTACT_FORCE`).
     Returns {"metrics", "detection", "predictions" (per block), "location_errors"
     (over the contact samples, for :func:`calc_error_map`; None on a sensor without
     angles)}."""
     spec = trained.spec
     raws, predictions, targets = [], [], []
-    for block in blocks:
+    for number, block in enumerate(blocks):
         readings = np.column_stack([block[name] for name in trained.channels])
         inputs = jnp.asarray(trained.normaliser(readings), dtype=jnp.float32)
         _, raw = _run(spec, trained.params, inputs)
@@ -126,7 +127,7 @@ def evaluate_estimator(trained, blocks: list, rate_hz: float, radius: float | No
         predictions.append(_decoded(spec, raw))
         count = len(readings)
         targets.append({
-            "force": np.column_stack([block[name] for name in FORCE_COLUMNS]).astype(np.float32),
+            "values": target_labels(block, spec.targets, f"recording {number + 1}").astype(np.float32),
             "theta": np.asarray(block.get("theta", np.full(count, np.nan)), np.float32),
             "phi": np.asarray(block.get("phi", np.full(count, np.nan)), np.float32),
             "contact": np.asarray(block["contact"], np.float32),
@@ -136,11 +137,10 @@ def evaluate_estimator(trained, blocks: list, rate_hz: float, radius: float | No
     metrics = {name: float(value) for name, value in calc_table_metrics(spec, jnp.concatenate(raws), joined, radius).items()}
     truth = np.concatenate([t["contact"] for t in targets]) > 0
     probability = np.concatenate([p["contact_probability"] for p in predictions])
-    magnitude = np.linalg.norm(np.column_stack([np.concatenate([p[name] for p in predictions]) for name in ("fx", "fy", "fz")]), axis=1)
-    detection = {
-        "contact_head": calc_detection(truth, probability > 0.5, rate_hz),
-        "force_threshold": calc_detection(truth, magnitude > CONTACT_FORCE, rate_hz),
-    }
+    detection = {"contact_head": calc_detection(truth, probability > 0.5, rate_hz)}
+    if all(name in spec.targets for name in FORCES[:3]):
+        magnitude = np.linalg.norm(np.column_stack([np.concatenate([p[name] for p in predictions]) for name in FORCES[:3]]), axis=1)
+        detection["force_threshold"] = calc_detection(truth, magnitude > CONTACT_FORCE, rate_hz)
     return {"metrics": metrics, "detection": detection, "predictions": predictions, "location_errors": _location_errors(spec, targets, predictions, radius)}
 
 

@@ -1,22 +1,23 @@
 """The training loss of an estimator and the paper's Table I metrics (pure JAX).
 
-Targets per sample (a dict of arrays with a leading time/batch shape): `force` (..., 4)
-Fx, Fy, Fz, Fn (N); `theta`, `phi` (rad; NaN where there is no contact); `contact`
-(0 or 1, |F| > 0.1 N); and `mask` (1 where the sample counts: after a sequence's
-burn-in, inside the data).
+Targets per sample (a dict of arrays with a leading time/batch shape): `values` (...,
+K) the spec's regression targets in order (N, m; NaN where unlabelled); `theta`, `phi`
+(rad; NaN where there is no contact); `contact` (0 or 1, |F| > 0.1 N); and `mask` (1
+where the sample counts: after a sequence's burn-in, inside the data).
 
-Loss = w_force · MSE(force) + w_angle · (cross-entropy over the bins, or the MSE of
-the angles, on contact samples) + w_contact · BCE(contact logit). The paper weighs
-the contact BCE by 10; the others by 1 (:data:`DEFAULT_WEIGHTS`).
+Loss = w_force · MSE(forces, N²) + w_position · MSE(positions and depth as z-scores, on
+contact samples) + w_angle · (cross-entropy over the bins, or the MSE of the angles, on
+contact samples) + w_contact · BCE(contact logit). The paper weighs the contact BCE by
+10; the others by 1 (:data:`DEFAULT_WEIGHTS`).
 """
 
 import jax
 import jax.numpy as jnp
 
 from ._bins import calc_bin_index
-from ._estimator import EstimatorSpec, decode_estimator_outputs
+from ._estimator import FORCES, EstimatorSpec, decode_estimator_outputs
 
-DEFAULT_WEIGHTS = {"force": 1.0, "angle": 1.0, "contact": 10.0}
+DEFAULT_WEIGHTS = {"force": 1.0, "angle": 1.0, "contact": 10.0, "position": 1.0}
 
 
 def _masked_mean(values, mask):
@@ -24,16 +25,33 @@ def _masked_mean(values, mask):
 
 
 def calc_loss_terms(spec: EstimatorSpec, raw, targets: dict) -> dict:
-    """Each loss term, averaged over the samples that count: `force` (N², mean of the
-    four), `angle` (bin cross-entropy, or rad² unbinned; contact samples only; 0 on a
-    sensor without angles), `contact` (BCE)."""
+    """Each loss term, averaged over the samples that count: `force` (N², mean over the
+    force targets; 0 without any), `position` (the mean squared z-score of the position
+    and depth targets, each over its labelled contact samples; 0 without any), `angle`
+    (bin cross-entropy, or rad² unbinned; contact samples only; 0 on a sensor without
+    angles), `contact` (BCE)."""
     mask = targets["mask"].astype(raw.dtype)
     layout = spec.outputs
-    force = jnp.mean((raw[..., :4] - targets["force"]) ** 2, axis=-1)
-    logit = raw[..., layout["contact"].start]
     label = targets["contact"].astype(raw.dtype)
+    forces = [k for k, name in enumerate(spec.targets) if name in FORCES]
+    zero = jnp.zeros((), raw.dtype)
+    if forces == list(range(len(forces))) and forces:  # they lead the outputs (the default: the four, in order)
+        force = _masked_mean(jnp.mean((raw[..., : len(forces)] - targets["values"][..., : len(forces)]) ** 2, axis=-1), mask)
+    elif forces:
+        columns = jnp.asarray([layout[spec.targets[k]].start for k in forces])
+        force = _masked_mean(jnp.mean((raw[..., columns] - targets["values"][..., jnp.asarray(forces)]) ** 2, axis=-1), mask)
+    else:
+        force = zero
+    position = zero
+    others = [k for k, name in enumerate(spec.targets) if name not in FORCES]
+    for k in others:
+        truth = targets["values"][..., k]
+        counted = mask * label * jnp.isfinite(truth)
+        z = (jnp.nan_to_num(truth) - spec.offsets[k]) / spec.scales[k]
+        position = position + _masked_mean((raw[..., layout[spec.targets[k]].start] - z) ** 2, counted) / len(others)
+    logit = raw[..., layout["contact"].start]
     contact = jnp.maximum(logit, 0.0) - logit * label + jnp.log1p(jnp.exp(-jnp.abs(logit)))  # BCE with logits, stable
-    terms = {"force": _masked_mean(force, mask), "contact": _masked_mean(contact, mask)}
+    terms = {"force": force, "contact": _masked_mean(contact, mask), "position": position}
     if not spec.angles:
         return terms | {"angle": jnp.zeros((), raw.dtype)}
     touching = mask * label * jnp.isfinite(targets["theta"]) * jnp.isfinite(targets["phi"])
@@ -69,14 +87,17 @@ def calc_arc_length(theta_1, phi_1, theta_2, phi_2, radius):
 
 
 def calc_table_metrics(spec: EstimatorSpec, raw, targets: dict, radius: float | None = None) -> dict:
-    """Table I of the paper on the samples that count: RMSE of Fx, Fy, Fz, Fn (N) over
-    all of them, of θ and φ (rad) over the contact samples, the contact BCE, and
-    (with the sensor's `radius`) the mean arc-length error (m) over contact samples."""
+    """Table I of the paper on the samples that count: RMSE of each force target (N)
+    over all of them, of each position and depth target (m) and of θ and φ (rad) over
+    the contact samples with labels, the contact BCE, and (with the sensor's `radius`)
+    the mean arc-length error (m) over contact samples."""
     mask = targets["mask"].astype(raw.dtype)
     out = decode_estimator_outputs(spec, raw)
     metrics = {}
-    for k, name in enumerate(("fx", "fy", "fz", "fn")):
-        metrics[f"{name}_rmse"] = jnp.sqrt(_masked_mean((out["force"][..., k] - targets["force"][..., k]) ** 2, mask))
+    for k, name in enumerate(spec.targets):
+        truth = targets["values"][..., k]
+        counted = mask if name in FORCES else mask * targets["contact"].astype(raw.dtype) * jnp.isfinite(truth)
+        metrics[f"{name}_rmse"] = jnp.sqrt(_masked_mean((out[name] - jnp.nan_to_num(truth)) ** 2, counted))
     metrics["contact_bce"] = calc_loss_terms(spec, raw, targets)["contact"]
     if spec.angles:
         touching = mask * targets["contact"].astype(raw.dtype) * jnp.isfinite(targets["theta"]) * jnp.isfinite(targets["phi"])

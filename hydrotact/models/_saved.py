@@ -63,4 +63,6 @@ def load_estimator(folder) -> TrainedEstimator:
     config = dict(document["config"])
     config["hidden"] = None if config["hidden"] is None else tuple(config["hidden"])
     config["weights"] = tuple(config["weights"].items())
+    if "targets" in config:
+        config["targets"] = tuple(config["targets"])
     return TrainedEstimator(spec, params, normaliser, tuple(document["channels"]), TrainConfig(**config), document["history"], int(document["best_epoch"]), document["stopped"])

@@ -17,7 +17,8 @@ import dataclasses
 
 import numpy as np
 
-FORCE_COLUMNS = ("fx", "fy", "fz", "fn")
+from .._errors import HydrotactError
+from ._estimator import FORCES, label_column
 
 
 @dataclasses.dataclass(frozen=True)
@@ -67,18 +68,33 @@ class Normaliser:
         return cls(np.asarray(document["mean_Pa"], dtype=np.float64), np.asarray(document["std_Pa"], dtype=np.float64), rest, None if scale is None else float(scale))
 
 
-def make_sequences(arrays: dict, channels, normaliser: Normaliser, length: int, burn_in: int, stride: int | None = None, dtype=np.float32) -> tuple[np.ndarray, dict]:
+def target_labels(arrays: dict, targets, source: str = "the data") -> np.ndarray:
+    """The labels (N, K) of regression `targets` from columns `arrays` (see
+    :data:`hydrotact.models.LABEL_COLUMNS`), or an error naming the missing label."""
+    from ._estimator import LABEL_COLUMNS
+
+    columns = []
+    for name in targets:
+        column = label_column(name, arrays)
+        if column is None:
+            raise HydrotactError(f"{source}: no label for the target {name!r} (a column {' or '.join(map(repr, LABEL_COLUMNS[name]))})")
+        columns.append(np.asarray(arrays[column], dtype=np.float64))
+    return np.column_stack(columns) if columns else np.zeros((len(arrays["time"]), 0))
+
+
+def make_sequences(arrays: dict, channels, normaliser: Normaliser, length: int, burn_in: int, stride: int | None = None, dtype=np.float32, targets=FORCES) -> tuple[np.ndarray, dict]:
     """Sequences of `burn_in + length` samples from `arrays` (a dataset split's
     columns with `block_starts`): inputs (S, burn_in + length, channels) normalised,
-    and targets {force (S, T, 4), theta, phi, contact, mask (S, T)}. Labelled spans
-    start every `stride` samples (default `length`: each label once) within a block."""
+    and targets {values (S, T, K) the regression `targets`' labels, theta, phi,
+    contact, mask (S, T)}. Labelled spans start every `stride` samples (default
+    `length`: each label once) within a block."""
     if length < 1 or burn_in < 0:
         raise ValueError(f"length must be positive and burn_in non-negative, got {length}, {burn_in}")
     stride = stride or length
     total = len(arrays["time"])
     edges = list(np.asarray(arrays["block_starts"], dtype=np.int64)) + [total]
     inputs = normaliser(np.column_stack([arrays[name] for name in channels]))
-    force = np.column_stack([arrays[name] for name in FORCE_COLUMNS])
+    values = target_labels(arrays, targets)
     theta = arrays.get("theta", np.full(total, np.nan))
     phi = arrays.get("phi", np.full(total, np.nan))
     contact = arrays["contact"]
@@ -92,6 +108,6 @@ def make_sequences(arrays: dict, channels, normaliser: Normaliser, length: int, 
             mask.append(valid)
     index = np.asarray(index, dtype=np.int64).reshape(-1, steps)
     mask = np.asarray(mask, dtype=bool).reshape(-1, steps)
-    targets = {"force": force[index].astype(dtype), "theta": theta[index].astype(dtype), "phi": phi[index].astype(dtype),
+    targets = {"values": values[index].astype(dtype), "theta": theta[index].astype(dtype), "phi": phi[index].astype(dtype),
                "contact": contact[index].astype(dtype), "mask": mask.astype(dtype)}
     return inputs[index].astype(dtype), targets

@@ -30,9 +30,9 @@ import optax
 
 from .._errors import HydrotactError
 from .._files import atomic_path, digest
-from ._estimator import EstimatorSpec, calc_estimator_sequence, check_budget, init_estimator, make_estimator_spec
+from ._estimator import FORCES, EstimatorSpec, calc_estimator_sequence, calc_target_scaling, check_budget, check_targets, init_estimator, make_estimator_spec
 from ._loss import DEFAULT_WEIGHTS, calc_loss, calc_table_metrics
-from ._sequences import Normaliser, make_sequences
+from ._sequences import Normaliser, make_sequences, target_labels
 
 SCHEDULES = ("constant", "cosine")
 CHECKPOINT = "checkpoint.npz"
@@ -43,7 +43,9 @@ class TrainConfig:
     """How an estimator is trained (every field is saved with the model).
 
     **Model:** `architecture` ("gru", "rnn", "mlp"), `binned` angle heads, `hidden`
-    sizes (None: the default of :func:`make_estimator_spec`), `cover` of the bins.
+    sizes (None: the default of :func:`make_estimator_spec`), `cover` of the bins,
+    the regression `targets` (:data:`hydrotact.models.REGRESSION_TARGETS`; the four
+    forces by default; e.g. ("x", "depth") for a strip pressed by a stage).
     **Data:** `sequence_length` labelled samples per sequence after `burn_in` samples
     of context. **Optimiser:** `batch_size` sequences per step (the paper's 50),
     `learning_rate`, `schedule` ("constant" or "cosine" over `max_epochs`),
@@ -75,8 +77,13 @@ class TrainConfig:
     restore_best: bool = True
     asinh_scale: float | None = None
     seed: int = 0
+    targets: tuple = FORCES
 
     def __post_init__(self):
+        try:
+            check_targets(self.targets)
+        except ValueError as error:
+            raise HydrotactError(f"targets: {error}") from None
         if self.schedule not in SCHEDULES:
             raise HydrotactError(f"schedule {self.schedule!r}: use one of {', '.join(SCHEDULES)}")
         for name in ("sequence_length", "batch_size", "max_epochs", "patience"):
@@ -96,6 +103,7 @@ class TrainConfig:
         document = dataclasses.asdict(self)
         document["hidden"] = None if self.hidden is None else list(self.hidden)
         document["weights"] = dict(self.weights)
+        document["targets"] = list(self.targets)
         return document
 
 
@@ -176,15 +184,20 @@ def train_estimator(dataset, sensor, config: TrainConfig | None = None, folder=N
     bins). With `folder`, resumable (see the module); `on_epoch(entry)` after each
     epoch's checkpoint. Returns a TrainedEstimator."""
     config = config or TrainConfig()
-    spec = make_estimator_spec(sensor, config.architecture, config.binned, config.hidden, config.cover)
-    check_budget(spec)
     channels = tuple(dataset.channels)
-    if spec.num_inputs != len(channels):
-        raise HydrotactError(f"{dataset.folder}: {len(channels)} barometer columns, the sensor {sensor.name!r} has {spec.num_inputs}")
     train = dataset.arrays("train")
     held_out = dataset.arrays("test")
     if not train or not held_out:
         raise HydrotactError(f"{dataset.folder}: training needs both a train and a test split")
+    target_labels(train, config.targets, str(dataset.folder))  # each target has its label column
+    try:
+        scaling = calc_target_scaling(train, config.targets, train.get("contact"))
+    except ValueError as error:
+        raise HydrotactError(f"{dataset.folder}: {error}") from None
+    spec = make_estimator_spec(sensor, config.architecture, config.binned, config.hidden, config.cover, config.targets, scaling)
+    check_budget(spec)
+    if spec.num_inputs != len(channels):
+        raise HydrotactError(f"{dataset.folder}: {len(channels)} barometer columns, the sensor {sensor.name!r} has {spec.num_inputs}")
     normaliser = _fit_normaliser(train, channels, config.asinh_scale)
     params = init_estimator(spec, jax.random.PRNGKey(config.seed))
     request = _request(config, {"dataset": dataset.manifest.get("request_digest"), "rows": dataset.num_rows})
@@ -213,12 +226,13 @@ def fine_tune_estimator(
     config = config or TrainConfig()
     channels = trained.channels
     for k, block in enumerate([*train_blocks, *validation_blocks]):
-        missing = [name for name in (*channels, "fx", "fy", "fz", "fn", "contact") if name not in block]
+        missing = [name for name in (*channels, "contact") if name not in block]
         if missing:
-            raise HydrotactError(f"recording {k + 1}: no column {missing[0]!r}; fine-tuning needs the channels {', '.join(channels)} and the force and contact labels")
+            raise HydrotactError(f"recording {k + 1}: no column {missing[0]!r}; fine-tuning needs the channels {', '.join(channels)} and the contact label")
+        target_labels(block, trained.spec.targets, f"recording {k + 1}")
     train, held_out = join_recordings(train_blocks), join_recordings(validation_blocks)
     normaliser = _fit_normaliser(train, channels, trained.normaliser.scale) if renormalise else trained.normaliser
-    config = dataclasses.replace(config, architecture=trained.spec.architecture, binned=trained.spec.binned, hidden=trained.spec.hidden)
+    config = dataclasses.replace(config, architecture=trained.spec.architecture, binned=trained.spec.binned, hidden=trained.spec.hidden, targets=trained.spec.targets)
     data = _digest_arrays([train[name] for name in sorted(train)] + [held_out[name] for name in sorted(held_out)])
     request = _request(config, {"fine_tune": data, "pretrained": _digest_arrays(_flat(trained.params)), "renormalise": renormalise})
     return _fit(trained.spec, trained.params, normaliser, channels, train, held_out, config, folder, progress, on_epoch, request)
@@ -237,8 +251,8 @@ def _digest_arrays(arrays: list) -> str:
 def _fit(spec, params, normaliser, channels, train, held_out, config, folder, progress, on_epoch, request) -> TrainedEstimator:
     from tqdm.auto import tqdm
 
-    inputs, targets = make_sequences(train, channels, normaliser, config.sequence_length, config.burn_in)
-    valid_inputs, valid_targets = make_sequences(held_out, channels, normaliser, config.sequence_length, config.burn_in)
+    inputs, targets = make_sequences(train, channels, normaliser, config.sequence_length, config.burn_in, targets=spec.targets)
+    valid_inputs, valid_targets = make_sequences(held_out, channels, normaliser, config.sequence_length, config.burn_in, targets=spec.targets)
     if not len(inputs) or not len(valid_inputs):
         raise HydrotactError("training needs samples in both the training and the validation recordings")
     valid_inputs, valid_targets = jnp.asarray(valid_inputs), {k: jnp.asarray(v) for k, v in valid_targets.items()}

@@ -22,7 +22,7 @@ from ._report import (
     make_report as make_report,
     write_fit_outputs as write_fit_outputs,
 )
-from ._rig_compare import compare_fit as compare_fit, compare_rig_log as compare_rig_log
+from ._rig_compare import compare_fit as compare_fit, compare_rig_log as compare_rig_log, label_rig_log as label_rig_log
 from ._solve import (
     SOLVERS as SOLVERS,
     BoundedLBFGSB as BoundedLBFGSB,

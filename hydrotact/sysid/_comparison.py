@@ -129,9 +129,10 @@ def summarise_comparison(source, channels, times, observed, predicted, mask, hol
     )
 
 
-def write_comparisons(comparisons, paths, output, header: dict, plot=None) -> dict:
+def write_comparisons(comparisons, paths, output, header: dict, plot=None, files: dict | None = None) -> dict:
     """Write each comparison's `NAME_predicted.parquet`, the pictures (`plot`) and
-    compare.json (`header`, then the logs) into `output`; returns the report."""
+    compare.json (`header`, then the logs) into `output`; returns the report (its
+    `files` beginning with `files`, those the caller already wrote there)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -139,7 +140,7 @@ def write_comparisons(comparisons, paths, output, header: dict, plot=None) -> di
     from .._files import atomic_path, write_text_atomic
 
     output.mkdir(parents=True, exist_ok=True)
-    files = {}
+    files = dict(files or {})
     for comparison, path in zip(comparisons, paths):
         columns = {"time": comparison.times}
         for c, name in enumerate(comparison.channels):

@@ -39,20 +39,27 @@ def plot_error_maps(maps: dict, path, title: str = "") -> None:
     save_figure(figure, path)
 
 
-def plot_contact_detection(times, force, contact, probability, predicted_force, path, threshold: float = 0.1, title: str = "") -> None:
+def plot_contact_detection(times, force, contact, probability, predicted_force, path, threshold: float = 0.1, title: str = "", signal: str = "|F| (N)") -> None:
     """The true |F| over time with the samples each detector calls contact shaded: the
     contact head (probability over 0.5) above, the predicted |F| over `threshold` N
-    below; the true contact flag as a line under each."""
+    below (none where `predicted_force` is None: an estimator without the forces);
+    the true contact flag as a line under each. `signal` names what `force` is (a
+    stage log without forces draws its depth: "depth (mm)")."""
     times = np.asarray(times) - float(np.asarray(times)[0])
-    figure, axes = new_figure(2, 1, figsize=(9, 5), sharex=True)
-    for axis, detected, name in ((axes[0], np.asarray(probability) > 0.5, "contact head (p > 0.5)"), (axes[1], np.asarray(predicted_force) > threshold, f"predicted |F| > {threshold:g} N")):
-        axis.plot(times, force, color="k", linewidth=0.8, label="true |F|")
+    force = np.nan_to_num(np.asarray(force, dtype=float))
+    panels = [(np.asarray(probability) > 0.5, "contact head (p > 0.5)")]
+    if predicted_force is not None:
+        panels.append((np.asarray(predicted_force) > threshold, f"predicted |F| > {threshold:g} N"))
+    figure, axes = new_figure(len(panels), 1, figsize=(9, 2.5 * len(panels) + 0.5), sharex=True, squeeze=False)
+    axes = axes[:, 0]
+    for axis, (detected, name) in zip(axes, panels):
+        axis.plot(times, force, color="k", linewidth=0.8, label=f"true {signal.split(' (')[0]}")
         top = max(float(np.max(force)), 1e-6) * 1.05
         axis.fill_between(times, 0.0, top, where=detected, color="tab:orange", alpha=0.3, step="mid", label=f"detected: {name}")
         axis.plot(times, -0.04 * top * (1 - np.asarray(contact)), color="tab:blue", linewidth=0.8, label="true flag (low: no contact)")
-        axis.set_ylabel("|F| (N)")
+        axis.set_ylabel(signal)
         axis.legend(fontsize=7, loc="upper right")
-    axes[1].set_xlabel("time (s)")
+    axes[-1].set_xlabel("time (s)")
     if title:
         axes[0].set_title(title, fontsize=9)
     figure.tight_layout()
