@@ -46,16 +46,19 @@ into this repository: the committed results are the table and the figure.
 4. **Sim-to-real estimation** (`--stages estimate`): an estimator of the contact's x
    along the strip and the indentation depth (`hydrotact train --targets x,depth`),
    scored on real logs it never saw. Each real log is labelled from its group's whole
-   fit (`compare --labels`: the tip's x is the stage's plus the fitted offset, its
-   depth the home less the lagged travel below the skin, contact the fitted model's
-   force over 0.1 N). A synthetic dataset of the strip (`--regime stage`: straight-down
+   fit (`hydrotact.sysid.label_rig_log`, as `compare --labels`: the tip's x is the
+   stage's plus the fitted offset, its depth the home less the lagged travel below
+   the skin, contact the model's force over 0.1 N, with the non-vacuum fit's material
+   for every log: the vacuum group's fit lets its gains take the scale (E∞ 0.14 MPa
+   against 1.26), and its force never reached 0.1 N on its own logs). A synthetic dataset of the strip (`--regime stage`: straight-down
    presses of the ball at random x over the logged span, depths 0.2-2.5 mm, the logs'
    speeds, holds of 0-10 s, at the logs' 16.4 Hz; the pocket model with the
    non-vacuum fit's material) pretrains the GRU. Leaving each real log out in turn,
    its x and depth RMSE (over its contact samples) for (a) the model trained on the
    simulation only, (b) the same architecture trained from scratch on 1 and on 3 real
    logs, (c) the pretrained model fine-tuned on the same 1 and 3 logs (the logs of the
-   held-out log's state first; each cut 75/25 into training and validation). Every
+   held-out log's state first; each cut between its presses, every fourth press
+   validating). Every
    log's channels are tared (each channel less its median over the log's first 20 s,
    plus the simulation's resting level): a session's baselines move by kPa.
 
@@ -410,33 +413,51 @@ def _tared(columns: dict, rest: np.ndarray) -> dict:
     return out
 
 
-def _split(block: dict, fraction: float = 0.75) -> tuple[dict, dict]:
-    cut = int(fraction * len(block["time"]))
-    return {k: np.asarray(v)[:cut] for k, v in block.items()}, {k: np.asarray(v)[cut:] for k, v in block.items()}
+def _split(block: dict, every: int = 4) -> tuple[list, list]:
+    """(training pieces, validation pieces) of a log: cut halfway between its presses
+    (its contact runs), every `every`-th press (from the third) to validation. A log
+    sweeps x from one end to the other, so a cut in time would validate on places the
+    training never saw."""
+    contact = np.asarray(block["contact"]) > 0
+    change = np.diff(np.concatenate([[0], contact.astype(int), [0]]))
+    starts, ends = np.flatnonzero(change == 1), np.flatnonzero(change == -1)
+    cuts = [0, *((ends[:-1] + starts[1:]) // 2).tolist(), len(contact)]
+    pieces = [{k: np.asarray(v)[a:b] for k, v in block.items()} for a, b in zip(cuts[:-1], cuts[1:])]
+    return [p for k, p in enumerate(pieces) if k % every != 2], [p for k, p in enumerate(pieces) if k % every == 2]
 
 
 def estimate_stage(spec_path: Path, logs: dict, work: Path, offset_mm: float, events: int) -> dict:
     """The sim-to-real study (see the module, 4.); resumable: the dataset, the
     pretrained model and each fold's numbers are kept in `work`."""
     import dataclasses
+    import warnings
 
     import jax
     from mtl_calibration import GROUPS
 
-    from hydrotact.data import read_log
+    from hydrotact import HydrotactWarning
+    from hydrotact.data import load_mapping, read_log, write_log
     from hydrotact.datasets import DatasetConfig, generate_dataset, load_dataset
     from hydrotact.models import TrainConfig, evaluate_estimator, fine_tune_estimator, init_estimator, load_estimator, save_estimator, train_estimator
     from hydrotact.sensors import load_sensor
-    from hydrotact.sysid import compare_fit
+    from hydrotact.sysid import label_rig_log
 
-    mapping = work / "mtl_mapping.json"
+    mapping = load_mapping(work / "mtl_mapping.json")
+    material = work / f"fit_{GAINS}_non-vacuum" / "fit" / "material.json"
     labelled = {}
     for group, names in GROUPS.items():
         folder = work / f"labels_{group}"
-        if not all((folder / f"{name}_labelled.parquet").is_file() for name in names):
-            compare_fit(work / f"fit_{GAINS}_{group}" / "fit", [logs[n] for n in names], folder, mapping=mapping, tare=f"first:{TARE_S:g}", labels=True)
+        folder.mkdir(exist_ok=True)
         for name in names:
-            labelled[name] = (group, read_log(folder / f"{name}_labelled.parquet"))
+            path = folder / f"{name}_labelled.parquet"
+            if not path.is_file():
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", HydrotactWarning)  # the logs' clock jitter, said by the fit stage
+                    log = read_log(logs[name], mapping, require_sensor=False)
+                write_log(path, label_rig_log(work / f"fit_{GAINS}_{group}" / "fit", log, str(logs[name]), tare=f"first:{TARE_S:g}", material=material))
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", HydrotactWarning)
+                labelled[name] = (group, read_log(path))
     # The presses' x on the strip (stage x 0-19 mm plus the fitted offset), a millimetre past each end.
     xs = np.concatenate([log.columns["contact_x"][np.isfinite(log.columns["contact_x"])] for _, log in labelled.values()])
     span = (float(xs.min()) - 1e-3, float(xs.max()) + 1e-3)
@@ -446,7 +467,6 @@ def estimate_stage(spec_path: Path, logs: dict, work: Path, offset_mm: float, ev
         stage_x_range=span, stage_y_range=(-0.3e-3, 0.3e-3), speed_range=(0.39e-3, 1.85e-3), hold_range=(0.0, 10.0), gap_range=(1.0, 4.0),
         rate_hz=16.4, num_rays=16, split_blocks=10, test_fraction=0.2,
     )
-    material = work / f"fit_{GAINS}_non-vacuum" / "fit" / "material.json"
     if not (dataset_folder / "manifest.json").is_file():
         start = time.perf_counter()
         generate_dataset(str(spec_path), dataset_folder, material=material, config=config, progress=True)
@@ -475,10 +495,11 @@ def estimate_stage(spec_path: Path, logs: dict, work: Path, offset_mm: float, ev
         fold = {"held_out": held, "group": group, "simulation_only": score(pretrained), "runs": []}
         for size in SIZES:
             parts = [_split(blocks[n]) for n in pool[:size]]
+            training, validation = [p for part in parts for p in part[0]], [p for part in parts for p in part[1]]
             tuned_config = dataclasses.replace(config_train, learning_rate=1e-3)
             fresh = dataclasses.replace(pretrained, params=init_estimator(pretrained.spec, jax.random.PRNGKey(1)))
             for kind, start in (("scratch", fresh), ("fine-tuned", pretrained)):
-                model = fine_tune_estimator(start, [p[0] for p in parts], [p[1] for p in parts], tuned_config if kind == "fine-tuned" else config_train)
+                model = fine_tune_estimator(start, training, validation, tuned_config if kind == "fine-tuned" else config_train)
                 fold["runs"].append({"kind": kind, "logs": pool[:size], "metrics": score(model), "epochs": len(model.history)})
         write_text_atomic(path, json.dumps(fold, indent=1) + "\n")
         folds.append(fold)

@@ -89,6 +89,10 @@ def test_table_metrics_of_a_perfect_estimate():
     metrics = calc_table_metrics(spec, jnp.asarray(raw), {k: jnp.asarray(v) for k, v in t.items()}, radius=0.01)
     for name, value in metrics.items():
         assert float(value) < 1e-8, name
+    # A recording without contact has no angle error to report: NaN, not a perfect 0.
+    untouched = t | {"contact": np.zeros(50)}
+    metrics = calc_table_metrics(spec, jnp.asarray(raw), {k: jnp.asarray(v) for k, v in untouched.items()}, radius=0.01)
+    assert np.isnan(metrics["theta_rmse"]) and np.isnan(metrics["phi_rmse"]) and np.isnan(metrics["arc_length_mean"]) and float(metrics["fx_rmse"]) < 1e-8
 
 
 def test_sequences_with_burn_in_cover_each_label_once_and_windows_match_the_paper():

@@ -24,6 +24,13 @@ def _masked_mean(values, mask):
     return jnp.sum(values * mask) / jnp.maximum(jnp.sum(mask), 1.0)
 
 
+def _masked_rms(values, mask):
+    """The RMS over the samples `mask` counts; NaN where it counts none (a metric of
+    nothing is not 0)."""
+    count = jnp.sum(mask)
+    return jnp.where(count > 0, jnp.sqrt(jnp.sum(values**2 * mask) / jnp.maximum(count, 1.0)), jnp.nan)
+
+
 def calc_loss_terms(spec: EstimatorSpec, raw, targets: dict) -> dict:
     """Each loss term, averaged over the samples that count: `force` (N², mean over the
     force targets; 0 without any), `position` (the mean squared z-score of the position
@@ -90,20 +97,21 @@ def calc_table_metrics(spec: EstimatorSpec, raw, targets: dict, radius: float | 
     """Table I of the paper on the samples that count: RMSE of each force target (N)
     over all of them, of each position and depth target (m) and of θ and φ (rad) over
     the contact samples with labels, the contact BCE, and (with the sensor's `radius`)
-    the mean arc-length error (m) over contact samples."""
+    the mean arc-length error (m) over contact samples. NaN where no sample counts."""
     mask = targets["mask"].astype(raw.dtype)
     out = decode_estimator_outputs(spec, raw)
     metrics = {}
     for k, name in enumerate(spec.targets):
         truth = targets["values"][..., k]
         counted = mask if name in FORCES else mask * targets["contact"].astype(raw.dtype) * jnp.isfinite(truth)
-        metrics[f"{name}_rmse"] = jnp.sqrt(_masked_mean((out[name] - jnp.nan_to_num(truth)) ** 2, counted))
+        metrics[f"{name}_rmse"] = _masked_rms(out[name] - jnp.nan_to_num(truth), counted)
     metrics["contact_bce"] = calc_loss_terms(spec, raw, targets)["contact"]
     if spec.angles:
         touching = mask * targets["contact"].astype(raw.dtype) * jnp.isfinite(targets["theta"]) * jnp.isfinite(targets["phi"])
         theta, phi = jnp.nan_to_num(targets["theta"]), jnp.nan_to_num(targets["phi"])
-        metrics["theta_rmse"] = jnp.sqrt(_masked_mean((out["theta"] - theta) ** 2, touching))
-        metrics["phi_rmse"] = jnp.sqrt(_masked_mean((out["phi"] - phi) ** 2, touching))
+        metrics["theta_rmse"] = _masked_rms(out["theta"] - theta, touching)
+        metrics["phi_rmse"] = _masked_rms(out["phi"] - phi, touching)
         if radius is not None:
-            metrics["arc_length_mean"] = _masked_mean(calc_arc_length(theta, phi, out["theta"], out["phi"], radius), touching)
+            mean = _masked_mean(calc_arc_length(theta, phi, out["theta"], out["phi"], radius), touching)
+            metrics["arc_length_mean"] = jnp.where(jnp.sum(touching) > 0, mean, jnp.nan)
     return metrics

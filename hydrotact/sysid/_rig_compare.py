@@ -167,14 +167,15 @@ def _compared(placed, source):
     return summarise_comparison(source, channels, placed["times"], observed, predicted, mask, hold, placed["noise"], np.full(observed.shape, np.nan), home_shift=placed["home_shift"])
 
 
-def _labelled(placed, report, log, source, contact_force):
+def _labelled(placed, report, log, source, contact_force, prony=None):
     from ..data import BarometerLog
 
     times, xy, travel = placed["times"], placed["xy"], placed["travel"]
     count = len(placed["channels"])
     with jax.enable_x64(True):
         unit = calc_stage_inputs(placed["table"], jnp.asarray(times), jnp.asarray(xy), jnp.asarray(travel), jnp.asarray(placed["home"]), jnp.asarray(placed["lag"]), jnp.arange(count, count + 3))
-        force = np.asarray(calc_contact_response(placed["prony"], jnp.asarray(times), unit))
+        prony = placed["prony"] if prony is None else jax.tree_util.tree_map(lambda a: jnp.asarray(a, jnp.float64), prony)
+        force = np.asarray(calc_contact_response(prony, jnp.asarray(times), unit))
     contact = np.linalg.norm(force, axis=1) > contact_force
     tips = placed["home"] - np.interp(times - placed["lag"], times, travel)
     depth = _skin_heights(report, xy, source) - tips
@@ -189,7 +190,7 @@ def compare_rig_log(prony, report, table, log, source, *, tare="no-load", home="
     return _compared(_placed(prony, report, table, log, source, tare, home), source)
 
 
-def label_rig_log(fit_dir, log, source: str = "log", *, tare="no-load", home="estimate", contact_force: float = CONTACT_THRESHOLD_N):
+def label_rig_log(fit_dir, log, source: str = "log", *, tare="no-load", home="estimate", contact_force: float = CONTACT_THRESHOLD_N, material=None):
     """A stage log with the labels an estimator of a stage rig learns, from the rig
     fit in `fit_dir`: the log again (a BarometerLog) with `contact` (the fitted
     model's force on the sensor over `contact_force` N: by default a dataset's
@@ -197,9 +198,12 @@ def label_rig_log(fit_dir, log, source: str = "log", *, tare="no-load", home="es
     the stage's plus the fitted offsets) and `depth` (the tip past the skin below it:
     the skin's height there, cast down on the sensor's mesh, less the tip's height,
     the home (placed as :func:`compare_rig_log` places it, with `tare` and `home`)
-    less the travel `lag` s before), each NaN without contact."""
+    less the travel `lag` s before), each NaN without contact. `material` (a
+    material document's path) computes the force from another fit's material (one
+    state's material fitted well, another's poorly, the rubber the same)."""
     prony, report, table = read_rig_fit(fit_dir)
-    return _labelled(_placed(prony, report, table, log, source, parse_tare(tare), home), report, log, source, contact_force)
+    other = None if material is None else material_prony(read_material(material))
+    return _labelled(_placed(prony, report, table, log, source, parse_tare(tare), home), report, log, source, contact_force, other)
 
 
 def _skin_heights(report, xy, source) -> np.ndarray:
