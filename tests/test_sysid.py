@@ -321,7 +321,8 @@ def test_fit_parameters_gradient_matches_refits():
         step = 2.0 if column < 2 else 5e-3
         bump = jnp.zeros_like(observed).at[sample, column].set(step)
         difference = (float(fitted(observed + bump)) - float(fitted(observed - bump))) / (2.0 * step)
-        np.testing.assert_allclose(gradient[sample, column], difference, rtol=1e-4, err_msg=f"sample {sample} column {column}")
+        # atol: an entry of no consequence (gradient exactly 0) against the refits' noise (1e-14 measured)
+        np.testing.assert_allclose(gradient[sample, column], difference, rtol=1e-4, atol=1e-9 * np.abs(gradient[:, column]).max(), err_msg=f"sample {sample} column {column}")
 
 
 # --- 6. relaxation curves and pyvisco ----------------------------------------------------------------
