@@ -38,12 +38,9 @@ demo: $(VENV)/.installed
 # All test processes share one persistent XLA compilation cache, made anew each run
 # (locked: its size is bounded): files, notebooks and experiments compile many of the
 # same programs, and one hydrotact cache (meshes, elastic fields, unit responses).
-# The suite is bound by XLA's compiler (each new static shape is a new program), so its
-# programs are compiled without LLVM's optimisation (XLA_FLAGS
-# --xla_backend_optimization_level=0; a user's runs keep the default): the same
-# arithmetic, rounded alike within the tests' tolerances (byte-identity tests compare
-# runs of one setting), at ~30 % less CPU (test_sim.py alone, empty caches: 167 ->
-# 119 CPU-s, 2026-12-06). Flags of the caller's XLA_FLAGS are kept after it.
+# (XLA's backend optimisation level 0 was tried, 2026-12-06: test_sim alone 29 % less
+# CPU, but the whole suite no faster: the files that run long solves slowed as much;
+# benchmarks/RESULTS.md.)
 TEST_JOBS ?= 2
 TEST_LOGS := .pytest-logs
 TEST_FIRST := tests/test_contact.py tests/test_datasets.py tests/test_taxel.py tests/test_forward_model.py tests/test_notebooks_and_experiments.py tests/test_press_fit.py
@@ -52,7 +49,7 @@ TEST_FILES := $(TEST_FIRST) $(filter-out $(TEST_FIRST),$(sort $(wildcard tests/t
 test: $(VENV)/.installed-test
 	$(BIN)/ruff check .
 	@rm -rf $(TEST_LOGS) && mkdir -p $(TEST_LOGS)
-	@export XLA_FLAGS="--xla_backend_optimization_level=0 $$XLA_FLAGS" JAX_COMPILATION_CACHE_DIR=$(CURDIR)/$(TEST_LOGS)/xla-cache JAX_COMPILATION_CACHE_MAX_SIZE=4000000000 HYDROTACT_TEST_CACHE_DIR=$(CURDIR)/$(TEST_LOGS)/hydrotact-cache; printf '%s\n' $(TEST_FILES) | xargs -P $(TEST_JOBS) -I FILE sh -c '\
+	@export JAX_COMPILATION_CACHE_DIR=$(CURDIR)/$(TEST_LOGS)/xla-cache JAX_COMPILATION_CACHE_MAX_SIZE=4000000000 HYDROTACT_TEST_CACHE_DIR=$(CURDIR)/$(TEST_LOGS)/hydrotact-cache; printf '%s\n' $(TEST_FILES) | xargs -P $(TEST_JOBS) -I FILE sh -c '\
 	    log=$(TEST_LOGS)/$$(basename FILE .py).log; echo "== FILE started"; \
 	    $(BIN)/python -m pytest --durations=8 FILE > $$log 2>&1; status=$$?; times > $$log.cpu; \
 	    echo "== FILE (exit $$status; CPU time of its processes, user and system: $$(tail -n 1 $$log.cpu))"; cat $$log; \

@@ -62,6 +62,10 @@ into this repository: the committed results are the table and the figure.
    log's channels are tared (each channel less its median over the log's first 20 s,
    plus the simulation's resting level): a session's baselines move by kPa.
 
+5. **One material for both states?** (`--stages joint`): the six logs fitted at once,
+   the vacuum and non-vacuum logs sharing the material, the x offset, the lag and the
+   barometers' gains (a home per log), against each state's own fit, by χ² and BIC.
+
 Outputs (in --output, default experiments/results/): `mtl_strip.json` (the sensor's
 alignment, the simulated profiles, the table), `mtl_strip.md` (the table of each
 channel's profile: where it peaks and how wide it is at half its peak, measured (each
@@ -248,8 +252,9 @@ def main() -> None:
     parser.add_argument("--data", type=Path, required=True, help="a checkout of the strip's repository, or a folder with design/ and logs/ laid out like it")
     parser.add_argument("--output", type=Path, default=Path(__file__).parent / "results")
     parser.add_argument("--depth", type=float, default=1.0, help="the simulated ball's depth into the skin, mm")
-    parser.add_argument("--stages", default="profile,fit,estimate",
-                        help="profile (the barometers' spatial profiles), fit (the material, full mode, with held-out logs), estimate (sim-to-real estimation; needs fit)")
+    parser.add_argument("--stages", default="profile,fit,estimate,joint",
+                        help="profile (the barometers' spatial profiles), fit (the material, full mode, with held-out logs), estimate (sim-to-real estimation; "
+                        "needs fit), joint (one material for the vacuum and non-vacuum logs; needs fit)")
     parser.add_argument("--events", type=int, default=400, help="presses in the simulated strip dataset of the estimate stage")
     args = parser.parse_args()
     stages = set(args.stages.split(","))
@@ -305,10 +310,12 @@ def main() -> None:
         "profiles_Pa": {kind: values.tolist() for kind, values in profiles.items()},
         "table": rows,
     }
-    if "fit" in stages or "estimate" in stages:
+    if stages & {"fit", "estimate", "joint"}:
         document["fit"] = fit_stage(work / f"{NAME}_sensor_pocket.json", logs, work, offset, args.output)
     if "estimate" in stages:
         document["estimate"] = estimate_stage(work / f"{NAME}_sensor_pocket.json", logs, work, offset, args.events)
+    if "joint" in stages:
+        document["joint"] = joint_stage(work / f"{NAME}_sensor_pocket.json", logs, work, offset)
     args.output.mkdir(parents=True, exist_ok=True)
     write_text_atomic(args.output / f"{NAME}.json", json.dumps(document, indent=1) + "\n")
     lines = ["| channel | port x (mm) | measured: peak x (vertex) / width (mm) | " + " | ".join(f"{kind}: peak x / width (mm), min / max (Pa)" for kind in MODELS) + " |",
@@ -321,12 +328,14 @@ def main() -> None:
         lines += ["", *fit_table(document["fit"])]
     if "estimate" in document:
         lines += ["", *estimate_table(document["estimate"])]
+    if "joint" in document:
+        lines += ["", *joint_lines(document["joint"])]
     write_text_atomic(args.output / f"{NAME}.md", "\n".join(lines) + "\n")
     _plot(document, measured, args.output / f"{NAME}.png")
     print(f"wrote {args.output / NAME}.{{json,md,png}}")
 
 
-ONSET_STEPS = {"non-vacuum": (1600.0, 2000.0), "vacuum": (2050.0, 2450.0)}  # the README's contact onsets, a little wider
+ONSET_STEPS = {"non-vacuum": (1600.0, 2000.0), "vacuum": (2050.0, 2450.0), "both": (1600.0, 2450.0)}  # the README's contact onsets, a little wider
 STEPS_PER_M = 480e3  # the README: 480 steps per mm
 SATURATION_PA = 140.5e3  # the README: mask samples above ~140.5 kPa
 MAX_TRAVEL_MM = 6.0  # the README: zd6 logs travel to 2880 steps
@@ -523,6 +532,54 @@ def estimate_table(estimate: dict) -> list:
         lines.append(f"| {fold['held_out']} | " + " | ".join(cells) + " |")
     lines.append("| RMS over the folds | " + " | ".join(
         f"{1e3 * np.sqrt(np.mean(np.square([v[0] for v in totals[label]]))):.2f} / {1e3 * np.sqrt(np.mean(np.square([v[1] for v in totals[label]]))):.2f}" for label, _, _ in kinds) + " |")
+    return lines
+
+
+def joint_stage(spec_path: Path, logs: dict, work: Path, offset_mm: float) -> dict:
+    """Whether one material explains both states: the six logs fitted at once (one
+    rig: the x offset, the lag and each barometer's relative gain shared, a home per
+    log within both states' onsets) against the two groups' own fits, by χ² and BIC
+    (χ² + parameters × ln(residuals)); resumable as the fit stage."""
+    from mtl_calibration import GROUPS
+
+    from hydrotact.sim import make_sensor_model
+    from hydrotact.sysid import SimulatorFit, fit_logs
+
+    mapping = work / "mtl_mapping.json"
+    top = float(np.max(np.asarray(make_sensor_model(spec_path).field.vertices)[:, 2])) * 1e3
+    rig = work / f"{NAME}_rig_both.json"
+    write_text_atomic(rig, json.dumps(make_rig_document(offset_mm, top, "both"), indent=1) + "\n")
+    folder = work / f"fit_{GAINS}_both"
+    names = [name for group in GROUPS.values() for name in group]
+    if not (folder / "fit" / "report.json").is_file():
+        start = time.perf_counter()
+        method = SimulatorFit(sensor=str(spec_path), num_rays=16, progress=False, rig=rig, drift=30.0, saturation_pa=SATURATION_PA, gains=GAINS)
+        fit_logs([logs[n] for n in names], folder / "fit", method=method, terms=2, mapping=mapping)
+        (folder / "seconds.txt").write_text(f"{time.perf_counter() - start:.1f}\n")
+
+    def summary(report):
+        return {"chi_square": report["chi_square"], "num_residuals": report["num_residuals"], "num_parameters": report["num_parameters"],
+                "long_term_modulus_Pa": report["long_term_modulus_Pa"], "prony_terms": report["prony_terms"], "offset_x_mm": 1e3 * report["rig"]["offset_x"]["value"],
+                "gains": {name.split("/")[-1]: value["value"] for name, value in report["gains"].items()}}
+
+    joint = summary(json.loads((folder / "fit" / "report.json").read_text()))
+    separate = {group: summary(json.loads((work / f"fit_{GAINS}_{group}" / "fit" / "report.json").read_text())) for group in GROUPS}
+    n = joint["num_residuals"]
+    bic = lambda chi, p: chi + p * np.log(n)
+    both = (sum(v["chi_square"] for v in separate.values()), sum(v["num_parameters"] for v in separate.values()))
+    return {"joint": joint | {"bic": bic(joint["chi_square"], joint["num_parameters"])}, "separate": separate,
+            "separate_bic": bic(*both), "separate_chi_square": both[0], "separate_num_parameters": both[1]}
+
+
+def joint_lines(joint: dict) -> list:
+    """The joint stage's table (markdown)."""
+    rows = [("both states, one material", joint["joint"]), *((f"{group} alone", value) for group, value in joint["separate"].items())]
+    lines = ["| fit | E∞ (MPa) | terms (MPa, s) | offset x (mm) | gains Sensor_0-3 | χ² | parameters |", "|---|---:|---|---:|---|---:|---:|"]
+    for label, value in rows:
+        terms = ", ".join(f"{t['modulus_Pa']['value'] / 1e6:.2f} @ {t['tau_s']['value']:.3g}" for t in value["prony_terms"])
+        gains = ", ".join(f"{value['gains'].get(c, 1.0):.2f}" for c in CHANNELS)
+        lines.append(f"| {label} | {value['long_term_modulus_Pa']['value'] / 1e6:.2f} | {terms} | {value['offset_x_mm']:.2f} | {gains} | {value['chi_square']:.4g} | {value['num_parameters']} |")
+    lines.append(f"\nBIC: one material {joint['joint']['bic']:.5g}, one per state {joint['separate_bic']:.5g} (lower is better).")
     return lines
 
 

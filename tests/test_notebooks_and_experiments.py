@@ -221,3 +221,16 @@ def test_mtl_strip_builds_its_sensor_from_a_mould_and_a_board(tmp_path, monkeypa
     spec = load_sensor(tmp_path / "strip.json")
     assert spec.taxel_names == strip["CHANNELS"] and spec.part.name == "MPL3115A2"
     np.testing.assert_allclose(spec.taxel_positions_S[1], [0.0, 0.0, 1.2e-3], atol=1e-9)
+    # The estimate stage's real logs: cut between presses (a log sweeps x, so a cut in
+    # time would validate where nothing trained), every fourth press validating from
+    # the third; each channel tared on its first 20 s onto the simulation's rest.
+    contact = np.array(([0] * 3 + [1] * 5) * 9 + [0] * 2)
+    block = {"time": np.arange(len(contact)) * 0.5, "contact": contact, "Sensor_0": np.arange(len(contact), dtype=float)}
+    training, validation = strip["_split"](block)
+    assert len(training) == 7 and len(validation) == 2
+    pieces = sorted(training + validation, key=lambda piece: piece["time"][0])
+    np.testing.assert_array_equal(np.concatenate([piece["time"] for piece in pieces]), block["time"])
+    assert all(np.sum(np.diff(np.concatenate([[0], piece["contact"], [0]])) == 1) == 1 for piece in pieces)
+    assert [piece["time"][0] for piece in validation] == [pieces[2]["time"][0], pieces[6]["time"][0]]
+    tared = strip["_tared"]({"time": block["time"], **{c: block["Sensor_0"] + 1e5 for c in strip["CHANNELS"]}}, np.full(4, 101325.0))
+    np.testing.assert_allclose(tared["Sensor_2"], block["Sensor_0"] - np.median(block["Sensor_0"][:41]) + 101325.0)
