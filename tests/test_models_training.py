@@ -3,6 +3,7 @@ the paper's Eq. 2, sequences with burn-in against the paper's windows; a short t
 on a tiny generated dataset (every loss term falls, every metric beats a constant
 predictor), resumption, saving, and `hydrotact train`."""
 
+import dataclasses
 import json
 
 import jax
@@ -193,6 +194,16 @@ def test_a_saved_model_reads_back_the_same(trained, tmp_path):
     for a, b in zip(jax.tree_util.tree_leaves(loaded.params), jax.tree_util.tree_leaves(trained.params)):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b, dtype=np.float32))
     np.testing.assert_array_equal(loaded.normaliser.mean, trained.normaliser.mean)
+    with pytest.raises(HydrotactError, match="not all finite"):  # no header with `nanf` in it
+        export_c_header(dataclasses.replace(trained, params=jax.tree_util.tree_map(lambda leaf: leaf.at[0].set(jnp.nan) if leaf.ndim == 1 else leaf, trained.params)), tmp_path / "model.h")
+    assert not (tmp_path / "model.h").exists()
+    with np.load(tmp_path / "weights.npz") as saved:
+        damaged = {name: saved[name] for name in saved.files}
+    damaged["w1"] = damaged["w1"].copy()
+    damaged["w1"].flat[0] = np.nan
+    np.savez(tmp_path / "weights.npz", **damaged)
+    with pytest.raises(HydrotactError, match="weights.npz: w1 holds 1 values that are not finite"):
+        load_estimator(tmp_path)
     (tmp_path / "weights.npz").write_bytes(b"not a zip")
     with pytest.raises(HydrotactError, match="weights.npz"):
         load_estimator(tmp_path)

@@ -16,6 +16,7 @@ when binned); `out.contact` the contact probability. The step is the same arithm
 rounding (the test compiles it with the system's C compiler).
 """
 
+import jax
 import numpy as np
 
 from .._files import write_text_atomic
@@ -44,6 +45,10 @@ def export_c_header(trained, path, sensor_name: str = "") -> dict:
     """Write `trained` as a C header at `path` (atomically). Returns a summary:
     parameters, MACs per step, flash bytes of the weights and the normalisation."""
     spec, params = trained.spec, trained.params
+    from .._errors import HydrotactError
+
+    if not all(np.all(np.isfinite(np.asarray(leaf))) for leaf in jax.tree_util.tree_leaves(params)):
+        raise HydrotactError(f"{path}: the estimator's weights are not all finite (NaN or inf): nothing exported (a diverged training; retrain)")
     sizes = (spec.num_inputs, *spec.hidden)
     mean = np.asarray(trained.normaliser.mean, dtype=np.float64)
     mean_hi = mean.astype(np.float32)

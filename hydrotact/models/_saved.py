@@ -55,9 +55,11 @@ def load_estimator(folder) -> TrainedEstimator:
             leaves = [saved[f"w{k}"] for k in range(len(jax.tree_util.tree_leaves(like)))]
     except (OSError, KeyError, ValueError) as error:
         raise HydrotactError(f"{folder / WEIGHTS}: unreadable or not this model's weights ({error})") from None
-    for leaf, expected in zip(leaves, jax.tree_util.tree_leaves(like)):
+    for k, (leaf, expected) in enumerate(zip(leaves, jax.tree_util.tree_leaves(like))):
         if leaf.shape != expected.shape:
             raise HydrotactError(f"{folder / WEIGHTS}: a weight of shape {leaf.shape}, the model needs {expected.shape}")
+        if not np.all(np.isfinite(leaf)):
+            raise HydrotactError(f"{folder / WEIGHTS}: w{k} holds {int(np.sum(~np.isfinite(leaf)))} values that are not finite (NaN or inf): a diverged or damaged training; retrain")
     params = jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(like), [jnp.asarray(leaf) for leaf in leaves])
     normaliser = Normaliser.from_json(document["normaliser"])
     config = dict(document["config"])
