@@ -5,6 +5,7 @@ determinism, resumption after SIGKILL, several devices and Ray workers, refusals
 import dataclasses
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -462,6 +463,25 @@ def test_two_ray_workers_give_the_same_bytes(reference, material_file, tmp_path)
 
 
 # --- refusals -----------------------------------------------------------------------
+
+
+def test_a_manifest_whose_split_or_shards_do_not_match_its_rows_is_refused(reference, tmp_path):
+    """A split pointing past the dataset's rows (an edited manifest) or shards that do
+    not add up to its rows: one error naming the field, not a training on nothing."""
+    for edit, words in (
+        (lambda m: m["split"]["train"].__setitem__(0, [0, m["num_rows"] + 500]), "split.train[0]"),
+        (lambda m: m.__setitem__("num_rows", m["num_rows"] + 1), "num_rows"),
+    ):
+        folder = tmp_path / words.replace("[", "").replace("]", "").replace(".", "_")
+        folder.mkdir()
+        for entry in reference.iterdir():
+            if entry.is_file():
+                (folder / entry.name).write_bytes(entry.read_bytes())
+        manifest = json.loads((folder / "manifest.json").read_text())
+        edit(manifest)
+        (folder / "manifest.json").write_text(json.dumps(manifest))
+        with pytest.raises(HydrotactError, match=re.escape(words)):
+            load_dataset(folder)
 
 
 def test_foreign_corrupt_and_other_folders_are_refused_untouched(reference, material_file, tmp_path, capsys):

@@ -53,7 +53,27 @@ def read_manifest(folder) -> dict:
         raise HydrotactError(f"{folder}: no {MANIFEST}: not a hydrotact dataset (or its generation has not finished: run the same command again)")
     document = read_json(path)
     validate(document, "dataset_manifest", str(path))
+    _check_rows(document, path)
     return document
+
+
+def _check_rows(document: dict, path) -> None:
+    """The shards laid end to end make the dataset's rows, and the split's ranges lie
+    within them: one error naming the field of a manifest that says otherwise (edited,
+    or another dataset's), before anything trains on it."""
+    total, expected = int(document["num_rows"]), 0
+    for k, shard in enumerate(document["shards"]):
+        if shard["first_row"] != expected:
+            raise HydrotactError(
+                f"{path}: shards[{k}].first_row is {shard['first_row']}, but the shards before it end at row {expected}: the manifest does not match its shards; regenerate the dataset"
+            )
+        expected += shard["rows"]
+    if expected != total:
+        raise HydrotactError(f"{path}: num_rows is {total}, but the shards hold {expected} rows: the manifest does not match its shards; regenerate the dataset")
+    for name in ("train", "test"):
+        for k, (first, end) in enumerate(document["split"][name]):
+            if not 0 <= first < end <= total:
+                raise HydrotactError(f"{path}: split.{name}[{k}]: rows [{first}, {end}) do not lie within the dataset's {total} rows; regenerate the dataset")
 
 
 def prepare_folder(folder, digest: str) -> str:
