@@ -18,7 +18,7 @@ import dataclasses
 import numpy as np
 
 from .._errors import HydrotactError
-from ._estimator import FORCES, label_column
+from ._estimator import FORCES, LABEL_COLUMNS, label_column
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,8 +71,6 @@ class Normaliser:
 def target_labels(arrays: dict, targets, source: str = "the data") -> np.ndarray:
     """The labels (N, K) of regression `targets` from columns `arrays` (see
     :data:`hydrotact.models.LABEL_COLUMNS`), or an error naming the missing label."""
-    from ._estimator import LABEL_COLUMNS
-
     columns = []
     for name in targets:
         column = label_column(name, arrays)

@@ -146,7 +146,7 @@ def _place_log(prony, report, table, log, source, tare, home) -> dict:
             "a press deeper than any the fit's logs and bounds allow; fit with logs as deep"
         )
     elastic, baseline = predict(height)
-    return {"channels": channels, "times": times, "xy": xy, "travel": travel, "lag": lag, "home": height, "home_shift": estimated,
+    return {"sensor": sensor_name, "channels": channels, "times": times, "xy": xy, "travel": travel, "lag": lag, "home": height, "home_shift": estimated,
             "observed": observed, "mask": mask, "noise": noise, "elastic": elastic, "baseline": baseline}
 
 
@@ -167,7 +167,7 @@ def _compared(placed, source):
     return summarise_comparison(source, channels, placed["times"], observed, predicted, mask, hold, placed["noise"], np.full(observed.shape, np.nan), home_shift=placed["home_shift"])
 
 
-def _labelled(placed, report, log, source, contact_force, prony=None):
+def _labelled(placed, log, source, contact_force, prony=None):
     from ..data import BarometerLog
 
     times, xy, travel = placed["times"], placed["xy"], placed["travel"]
@@ -178,7 +178,7 @@ def _labelled(placed, report, log, source, contact_force, prony=None):
         force = np.asarray(calc_contact_response(prony, jnp.asarray(times), unit))
     contact = np.linalg.norm(force, axis=1) > contact_force
     tips = placed["home"] - np.interp(times - placed["lag"], times, travel)
-    depth = _skin_heights(report, xy, source) - tips
+    depth = _skin_heights(placed["sensor"], xy, source) - tips
     nothing = np.full(len(times), np.nan)
     labels = {"contact": contact.astype(np.float64), "contact_x": np.where(contact, xy[:, 0], nothing),
               "contact_y": np.where(contact, xy[:, 1], nothing), "depth": np.where(contact, depth, nothing)}
@@ -203,22 +203,20 @@ def label_rig_log(fit_dir, log, source: str = "log", *, tare="no-load", home="es
     state's material fitted well, another's poorly, the rubber the same)."""
     prony, report, table = read_rig_fit(fit_dir)
     other = None if material is None else material_prony(read_material(material))
-    return _labelled(_placed(prony, report, table, log, source, parse_tare(tare), home), report, log, source, contact_force, other)
+    return _labelled(_placed(prony, report, table, log, source, parse_tare(tare), home), log, source, contact_force, other)
 
 
-def _skin_heights(report, xy, source) -> np.ndarray:
+def _skin_heights(sensor, xy, source) -> np.ndarray:
     """(T,) the skin's height (m) straight below each tip position `xy` (T, 2): the
-    first surface of the fitted sensor's mesh a ray cast down meets (NaN where none)."""
+    first surface of the fitted `sensor`'s mesh (as :func:`_place_log` resolved it) a
+    ray cast down meets (NaN where none)."""
     from ..sensors import load_sensor
     from ..taxel import calc_first_hits
 
-    names = sorted({entry.get("sensor") for entry in report.get("logs", [])} - {None})
-    if len(names) != 1:
-        raise HydrotactError(f"{source}: the fit's report names {len(names)} sensors; labels need the one the rig pressed")
     try:
-        mesh = load_sensor(names[0]).make_mesh(check=False)
+        mesh = load_sensor(sensor).make_mesh(check=False)
     except (HydrotactError, OSError) as error:
-        raise HydrotactError(f"{source}: the fit's sensor {names[0]!r} cannot be read to find its skin ({error})") from None
+        raise HydrotactError(f"{source}: the fit's sensor {sensor!r} cannot be read to find its skin ({error})") from None
     vertices = np.asarray(mesh.vertices)
     above = float(vertices[:, 2].max()) + 1e-3
     sites, index = np.unique(np.round(xy, 9), axis=0, return_inverse=True)
@@ -275,7 +273,7 @@ def compare_fit(fit_dir, paths, output, *, mapping=None, tare="no-load", home="e
     logs = read_logs([Path(p) for p in paths], mapping, None, require_sensor=False)
     placed = [_placed(prony, report, table, log, str(path), tare, home) for log, path in zip(logs, paths)]
     comparisons = [_compared(entry, str(path)) for entry, path in zip(placed, paths)]
-    labelled = [_labelled(entry, report, log, str(path), CONTACT_THRESHOLD_N) for entry, log, path in zip(placed, logs, paths)] if labels else []
+    labelled = [_labelled(entry, log, str(path), CONTACT_THRESHOLD_N) for entry, log, path in zip(placed, logs, paths)] if labels else []
     header = {"fit": str(fit_dir), "tare": tare if isinstance(tare, str) else f"first:{tare[1]:g}", "home": home, "prediction_band": None}
     files = {}
     if labelled:
