@@ -155,9 +155,9 @@ def print_fit_table(report: dict, truth: dict | None = None) -> None:
         table.add_row(f"... {len(report['gains']) - 8} more gains in report.json", *[""] * (len(table.columns) - 1))
     for name, estimate in report.get("rig", {}).items():
         if estimate["fitted"]:
-            seconds = name == "lag_s"
-            scaled = estimate if seconds else {**estimate, "value": 1e3 * estimate["value"], "std": 1e3 * estimate["std"]}
-            row(f"rig {name.removesuffix('_s')}", scaled, truth and truth.get("rig", {}).get(name), " s" if seconds else " mm")
+            unit = " s" if name == "lag_s" else "" if name.startswith("slope_x") else " mm"
+            scaled = estimate if unit != " mm" else {**estimate, "value": 1e3 * estimate["value"], "std": 1e3 * estimate["std"]}
+            row(f"rig {name.removesuffix('_s')}", scaled, truth and truth.get("rig", {}).get(name), unit)
     Console().print(table)
     for note, names in notes.items():
         print(f"  not identified: {', '.join(names)}: {note}")

@@ -19,6 +19,7 @@ from .._schemas import read_json, validate
 from .._units import LENGTH_UNITS
 
 DEFAULT_COLUMNS = {"travel": "indentation", "x": "stage_x", "y": "stage_y"}
+MAX_SLOPE = 0.3  # |slope_x| beyond this is a stage tilted over ~17 degrees: an angle or a unit mistaken, not a rig
 DEFAULT_TABLE_STEP = {"xy": 0.25e-3, "height": 0.05e-3}  # m
 
 
@@ -45,7 +46,9 @@ class Rig:
     """A stage rig (SI units): the `probe` spec (pressed upright along the sensor's
     −z), the log's stage `columns` (travel, x, y), `offset_x`, `offset_y` (the
     sensor-frame position of the stage's origin), `home` (the tip's height at travel
-    0, per log), `lag_s` (the pressures' lag behind the logged travel), and the
+    0 over the stage's x = 0, per log), `lag_s` (the pressures' lag behind the
+    logged travel), `slope_x` (None: level; else the change of that height per metre
+    of stage x, per log: the tip at home + slope_x · stage x − travel), and the
     response table's steps `xy_step`, `height_step` (m) and the deepest travel it
     covers, `max_travel` (m; None: the fitted logs' deepest)."""
 
@@ -55,6 +58,7 @@ class Rig:
     offset_y: RigParameter
     home: RigParameter
     lag_s: RigParameter
+    slope_x: RigParameter | None = None
     xy_step: float = DEFAULT_TABLE_STEP["xy"]
     height_step: float = DEFAULT_TABLE_STEP["height"]
     max_travel: float | None = None
@@ -121,12 +125,16 @@ def read_rig(path) -> Rig:
         offset_y=_parameter(document, "offset_y", scale, source, default=0.0),
         home=_parameter(document, "home", scale, source),
         lag_s=lag,
+        slope_x=_parameter(document, "slope_x", 1.0, source) if "slope_x" in document else None,
         xy_step=steps.get("xy", DEFAULT_TABLE_STEP["xy"]),
         height_step=steps.get("height", DEFAULT_TABLE_STEP["height"]),
         max_travel=scale * document["max_travel"] if "max_travel" in document else None,
         name=document.get("name", Path(path).stem),
         source=source,
     )
+    if rig.slope_x is not None and max(abs(rig.slope_x.low), abs(rig.slope_x.high)) > MAX_SLOPE:
+        raise HydrotactError(f"{source}: slope_x: {max(abs(rig.slope_x.low), abs(rig.slope_x.high)):g} is steeper than {MAX_SLOPE:g} (a stage tilted over ~17 degrees): "
+                             "slope_x is the change of the tip's height per unit of stage x, not an angle")
     for key, step in (("table_step.xy", rig.xy_step), ("table_step.height", rig.height_step)):
         if not 1e-6 <= step <= 5e-3 or not math.isfinite(step):
             raise HydrotactError(f"{source}: {key}: {step * 1e3:g} mm is not a table step (1 um to 5 mm)")

@@ -67,7 +67,8 @@ class StageSession:
     presses, s (the stage moves to the next site halfway through); `lead` no-load
     time at the start and end, s; `clearance` of the stage's home above the highest
     contact onset, m; `home_spread` the standard deviation of the home between
-    sessions, m (the `indentation` column's zero).
+    sessions, m (the `indentation` column's zero); `slope_x` the stage's tilt: the tip's
+    height at travel 0 rises by slope_x per metre of stage x (0: level).
 
     **The logging**: `rate_hz` the nominal rate; `jitter_s` the clock jitter (the
     standard deviation of a step), drawn in this range; `num_gaps` gaps of
@@ -90,6 +91,7 @@ class StageSession:
     lead: float = 3.0
     clearance: float = 0.3e-3
     home_spread: float = 0.1e-3
+    slope_x: float = 0.0
     rate_hz: float = 16.0
     jitter_s: tuple[float, float] = (0.007, 0.020)
     num_gaps: int = 1
@@ -235,7 +237,8 @@ def simulate_stage_log(
     (the stage's travel towards the skin, m), `stage_x`, `stage_y` (m); the truth: a
     dict with `presses` (per press: site, onset and deepest travel, start and end,
     s), `sites` (S, 2) m, `contact_z_m` (S,) the probe tip's height at first touch,
-    `lag_s`, `home_offset_m`, `drift` (T, C) Pa, `baseline_pa` (C,), `elastic`
+    `lag_s`, `home_offset_m`, `home_m` (the tip's height at travel 0 over stage x =
+    0), `slope_x`, `drift` (T, C) Pa, `baseline_pa` (C,), `elastic`
     (simulation times, (T', C) elastomer pressures, 0 on silent channels), `clipped`
     (T, C) bool, `silent`, `overload`, `material`, `channels`).
     """
@@ -254,10 +257,11 @@ def simulate_stage_log(
     model = make_sensor_model(spec, num_rays=num_rays)
     contact_z = find_contact_heights(model, probe, sites)
     home_offset = max(session.home_spread * rng.standard_normal(), 0.2 * session.clearance - session.clearance)  # never at the skin
-    home = float(contact_z.max()) + session.clearance + home_offset
-    onsets = home - contact_z  # the travel at which each site's contact starts
+    rise = session.slope_x * sites[:, 0]  # a tilted stage: the height at travel 0 over each site, above the home
+    home = float(np.max(contact_z - rise)) + session.clearance + home_offset
+    onsets = home + rise - contact_z  # the travel at which each site's contact starts
     times, travel, site_of, presses = _stage_plan(session, onsets, rng, sim_rate_hz)
-    translations = np.column_stack([sites[site_of], home - travel])
+    translations = np.column_stack([sites[site_of], home + rise[site_of] - travel])
     trajectory = make_trajectory(times, translations, source="stage session")
     log, _ = simulate_log(spec, probe, trajectory, material, num_rays=num_rays, progress=progress)
     elastic = log.channels  # elastomer pressure on the simulation clock
@@ -303,6 +307,8 @@ def simulate_stage_log(
         "contact_z_m": contact_z,
         "lag_s": float(session.lag_s),
         "home_offset_m": float(home_offset),
+        "home_m": home,
+        "slope_x": float(session.slope_x),
         "drift": drift,
         "baseline_pa": baseline,
         "elastic": (times, elastic),

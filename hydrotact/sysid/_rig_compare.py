@@ -70,7 +70,9 @@ def _elastic(prony, table, times, xy, travel, lag, home, gains):
 
 def _place_log(prony, report, table, log, source, tare, home) -> dict:
     """A held-out log placed on the rig fit: its channels, times, tips (xy with the
-    offsets), travel, lag, home (estimated, the fit's or the mean of its homes), and
+    offsets), travel, lag, home (estimated, the fit's or the mean of its homes; (T,),
+    the height at travel 0 under each sample, where the fit has a slope along the
+    stage's x: the log's own, or the mean of the fit's), and
     the prediction there (elastic, baseline), with the observed readings, the mask
     of unclipped samples and the noise. Call inside `jax.enable_x64(True)`."""
     from scipy.optimize import minimize_scalar
@@ -92,7 +94,8 @@ def _place_log(prony, report, table, log, source, tare, home) -> dict:
     times = np.asarray(log.times, dtype=np.float64)
     travel = np.asarray(log.columns[columns["travel"]], dtype=np.float64)
     y = np.asarray(log.columns[columns["y"]], dtype=np.float64) if columns["y"] in log.columns else np.zeros_like(times)
-    xy = np.column_stack([np.asarray(log.columns[columns["x"]], dtype=np.float64) + rig["offset_x"]["value"], y + rig["offset_y"]["value"]])
+    stage_x = np.asarray(log.columns[columns["x"]], dtype=np.float64)
+    xy = np.column_stack([stage_x + rig["offset_x"]["value"], y + rig["offset_y"]["value"]])
     origin, step, shape = np.asarray(table.origin), np.asarray(table.step), table.values.shape
     for axis, label in ((0, "x"), (1, "y")):
         low, high = origin[axis], origin[axis] + step[axis] * (shape[axis] - 1)
@@ -113,10 +116,13 @@ def _place_log(prony, report, table, log, source, tare, home) -> dict:
     digest = file_digest(source)
     own = [k for k, entry in enumerate(report.get("logs", [])) if digest is not None and entry.get("sha256") == digest]
     lag = float(rig["lag_s"]["value"])
+    slopes = [rig[key]["value"] for key in rig if key.startswith("slope_x[")]
+    slope = (slopes[own[0]] if own else float(np.mean(slopes))) if slopes else 0.0
+    rise = slope * stage_x  # (T,) the height at travel 0 above the home (a sloped stage)
     arguments = (prony, table, jnp.asarray(times), jnp.asarray(xy), jnp.asarray(travel), jnp.asarray(lag))
 
     def predict(height):
-        elastic = np.asarray(_elastic(*arguments, jnp.asarray(height), jnp.asarray(gains)))
+        elastic = np.asarray(_elastic(*arguments, jnp.asarray(height + rise), jnp.asarray(gains)))
         baseline, used, _ = tare_baseline(tare, times, observed, elastic, mask, basis, source, channels, _solve_baseline)
         return elastic, baseline
 
@@ -139,14 +145,14 @@ def _place_log(prony, report, table, log, source, tare, home) -> dict:
         estimated = (height - float(np.mean(homes)), float(np.sqrt(2.0 / curvature)) if curvature > 0.0 else float(width))
     else:
         height = float(np.mean(homes))
-    deepest = height - float(np.max(travel))
+    deepest = float(np.min(height + rise - travel))
     if deepest < origin[2] - 1e-9:
         raise HydrotactError(
             f"{source}: its deepest press puts the tip at {deepest * 1e3:.3f} mm, below the fit's response table ({origin[2] * 1e3:.3f} mm): "
             "a press deeper than any the fit's logs and bounds allow; fit with logs as deep"
         )
     elastic, baseline = predict(height)
-    return {"sensor": sensor_name, "channels": channels, "times": times, "xy": xy, "travel": travel, "lag": lag, "home": height, "home_shift": estimated,
+    return {"sensor": sensor_name, "channels": channels, "times": times, "xy": xy, "travel": travel, "lag": lag, "home": height + rise, "home_shift": estimated,
             "observed": observed, "mask": mask, "noise": noise, "elastic": elastic, "baseline": baseline}
 
 

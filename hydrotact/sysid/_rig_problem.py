@@ -2,8 +2,9 @@
 (pure, but for :func:`make_rig_arrays`, host).
 
 A stage log has no probe pose; a rig (:class:`hydrotact.data.Rig`) makes one: the
-tip at (stage x + offset_x, stage y + offset_y, home − travel(t − lag)), pressed
-upright. The unit responses then depend on those parameters, so the fit reads them
+tip at (stage x + offset_x, stage y + offset_y, home + slope_x · stage x −
+travel(t − lag)), pressed upright (slope_x where the rig has one: a stage not level
+with the skin). The unit responses then depend on those parameters, so the fit reads them
 off the rig's response table (:func:`hydrotact.sim.calc_rig_inputs`) at every step
 instead of once. Each fitted parameter lives in x as u, its value centre + half ·
 tanh(u): always inside its bounds (the table covers them), smooth across them.
@@ -25,7 +26,8 @@ class RigArrays(eqx.Module):
     `stage_xy` (T, 2) and `travel` (T,) (m) and the table `columns` its inputs read
     (its channels, then its fitted force columns); every rig parameter's `centre`
     and `half` range (P,) in the order of `names` (offset_x, offset_y, home[k] per
-    log, lag_s; half 0 where fixed)."""
+    log, lag_s, then slope_x[k] per log where the rig has a slope; half 0 where
+    fixed)."""
 
     table: RigTable
     stage_xy: tuple[Float[Array, "num_samples 2"], ...]
@@ -46,8 +48,9 @@ class RigArrays(eqx.Module):
         return tuple(int(k) for k in np.flatnonzero(np.asarray(self.half) > 0.0))
 
 
-def rig_parameter_names(num_logs: int) -> tuple[str, ...]:
-    return ("offset_x", "offset_y", *[f"home[{k + 1}]" for k in range(num_logs)], "lag_s")
+def rig_parameter_names(num_logs: int, sloped: bool = False) -> tuple[str, ...]:
+    slopes = [f"slope_x[{k + 1}]" for k in range(num_logs)] if sloped else []
+    return ("offset_x", "offset_y", *[f"home[{k + 1}]" for k in range(num_logs)], "lag_s", *slopes)
 
 
 def rig_values(rig: RigArrays, free: tuple[int, ...], u):
@@ -68,8 +71,9 @@ def rig_start(rig: RigArrays, free: tuple[int, ...], starts) -> np.ndarray:
 
 def calc_stage_inputs(table: RigTable, times, tips_xy, travel, home, lag, columns):
     """(T, K) unit responses of a stage log: the tips at `tips_xy` (T, 2) (the stage
-    moved by the offsets) and at `home` less the travel read `lag` s before each
-    sample (the pressures lag the logged travel), off the rig's `table`."""
+    moved by the offsets) and at `home` (a scalar, or (T,) where the rig has a slope)
+    less the travel read `lag` s before each sample (the pressures lag the logged
+    travel), off the rig's `table`."""
     lagged = jnp.interp(times - lag, times, travel)
     return calc_rig_inputs(table, tips_xy, home - lagged, columns)
 
@@ -79,6 +83,8 @@ def rig_log_inputs(rig: RigArrays, values, log: int, times):
     num_logs = len(rig.travel)
     offset = values[:2]
     home, lag = values[2 + log], values[2 + num_logs]
+    if len(rig.names) > 3 + num_logs:  # sloped: the height at travel 0 follows the stage's x
+        home = home + values[3 + num_logs + log] * rig.stage_xy[log][:, 0]
     return calc_stage_inputs(rig.table, times, rig.stage_xy[log] + offset[None, :], rig.travel[log], home, lag, rig.columns[log])
 
 
@@ -94,13 +100,17 @@ def make_rig_arrays(rig, model, probe, logs, sources, columns, progress: bool = 
         xy, moved = rig.stage_columns(log, source)
         stage_xy.append(xy)
         travel.append(moved)
-    parameters = [rig.offset_x, rig.offset_y, *[rig.home] * len(logs), rig.lag_s]
+    slopes = [] if rig.slope_x is None else [rig.slope_x] * len(logs)
+    parameters = [rig.offset_x, rig.offset_y, *[rig.home] * len(logs), rig.lag_s, *slopes]
     all_xy = np.concatenate(stage_xy)
     x_range = (float(all_xy[:, 0].min()) + rig.offset_x.low, float(all_xy[:, 0].max()) + rig.offset_x.high)
     y_range = (float(all_xy[:, 1].min()) + rig.offset_y.low, float(all_xy[:, 1].max()) + rig.offset_y.high)
     deepest = max(max(float(np.max(t)) for t in travel), rig.max_travel or 0.0)  # a held-out log may press deeper
     shallowest = min(float(np.min(t)) for t in travel)
-    height_range = (rig.home.low - deepest, rig.home.high - shallowest)
+    rise = np.zeros(1)  # the slope's reach: slope_x · stage x at the stage's extremes and the slope's bounds
+    if rig.slope_x is not None:
+        rise = np.outer([rig.slope_x.low, rig.slope_x.high], [all_xy[:, 0].min(), all_xy[:, 0].max()]).ravel()
+    height_range = (rig.home.low + float(rise.min()) - deepest, rig.home.high + float(rise.max()) - shallowest)
     poses = (int(np.ceil((x_range[1] - x_range[0]) / rig.xy_step)) + 1) * (int(np.ceil((y_range[1] - y_range[0]) / rig.xy_step)) + 1)
     poses *= int(np.ceil((height_range[1] - height_range[0]) / rig.height_step)) + 1
     if poses > 2_000_000:
@@ -119,10 +129,11 @@ def make_rig_arrays(rig, model, probe, logs, sources, columns, progress: bool = 
         columns=tuple(jnp.asarray(c) for c in columns),
         centre=jnp.asarray(centre),
         half=jnp.asarray(half),
-        names=rig_parameter_names(len(logs)),
+        names=rig_parameter_names(len(logs), sloped=rig.slope_x is not None),
         setup=(
             ("name", rig.name), ("probe", rig.probe), ("columns", tuple(sorted(rig.columns.items()))), ("drift", drift), ("saturation_pa", saturation_pa),
-            ("bounds", tuple((name, (p.low, p.high)) for name, p in (("offset_x", rig.offset_x), ("offset_y", rig.offset_y), ("home", rig.home), ("lag_s", rig.lag_s)))),
+            ("bounds", tuple((name, (p.low, p.high)) for name, p in (("offset_x", rig.offset_x), ("offset_y", rig.offset_y), ("home", rig.home), ("lag_s", rig.lag_s),
+                                                                     *([("slope_x", rig.slope_x)] if rig.slope_x is not None else [])))),
             ("table_step", (("xy", rig.xy_step), ("height", rig.height_step))),
         ),
     )
