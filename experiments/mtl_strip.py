@@ -343,12 +343,14 @@ SCORED = ("Sensor_1", "Sensor_2", "Sensor_3")
 GAINS = "relative"  # each barometer's own sensitivity, their geometric mean 1 (E keeps the scale)
 
 
-def make_rig_document(offset_mm: float, skin_top_mm: float, group: str) -> dict:
+def make_rig_document(offset_mm: float, skin_top_mm: float, group: str, slope: float | None = None) -> dict:
     """The stage rig of a group of logs (mm): the 10 mm ball, x offset within ±2 mm of
     `offset_mm`, the home (the tip's height at travel 0) where the README puts the
-    contact onsets above the skin's top, the lag within 0-0.2 s."""
+    contact onsets above the skin's top, the lag within 0-0.2 s; with `slope`, the
+    stage's x axis may tilt against the skin by up to that ratio either way, per log."""
     low, high = (skin_top_mm + steps / STEPS_PER_M * 1e3 for steps in ONSET_STEPS[group])
-    return {
+    tilt = {} if slope is None else {"slope_x": {"start": 0.0, "min": -slope, "max": slope}}
+    return tilt | {
         "format": "hydrotact.rig", "version": 1, "name": f"mtl-stage-{group}",
         "description": "The MTL strip's stage: a 10 mm steel ball (assumed; not recorded with the logs), z travel towards the skin, x along the strip.",
         "units": {"length": "mm"}, "probe": f"sphere:r={BALL_RADIUS_M * 1e3:g}mm", "columns": {"travel": "indentation", "x": "stage_x"},
@@ -535,51 +537,73 @@ def estimate_table(estimate: dict) -> list:
     return lines
 
 
-def joint_stage(spec_path: Path, logs: dict, work: Path, offset_mm: float) -> dict:
-    """Whether one material explains both states: the six logs fitted at once (one
-    rig: the x offset, the lag and each barometer's relative gain shared, a home per
-    log within both states' onsets) against the two groups' own fits, by χ² and BIC
-    (χ² + parameters × ln(residuals)); resumable as the fit stage."""
+SLOPE = 0.08  # the tilted stage's bound (mm per mm of stage x): 1.5 mm over the 19 mm the presses span
+
+
+def _whole_fit(spec_path: Path, logs: dict, names: list, work: Path, offset_mm: float, group: str, slope: float | None) -> dict:
+    """One fit of the logs `names` whole (resumable: read back when done), the group's
+    rig (`both`: either state's onsets), level or with a slope per log; its summary."""
     from mtl_calibration import GROUPS
 
     from hydrotact.sim import make_sensor_model
     from hydrotact.sysid import SimulatorFit, fit_logs
 
-    mapping = work / "mtl_mapping.json"
-    top = float(np.max(np.asarray(make_sensor_model(spec_path).field.vertices)[:, 2])) * 1e3
-    rig = work / f"{NAME}_rig_both.json"
-    write_text_atomic(rig, json.dumps(make_rig_document(offset_mm, top, "both"), indent=1) + "\n")
-    folder = work / f"fit_{GAINS}_both"
-    names = [name for group in GROUPS.values() for name in group]
+    sloped = "" if slope is None else "_sloped"
+    folder = work / f"fit_{GAINS}_{group}{sloped}"
     if not (folder / "fit" / "report.json").is_file():
+        top = float(np.max(np.asarray(make_sensor_model(spec_path).field.vertices)[:, 2])) * 1e3
+        rig = work / f"{NAME}_rig_{group}{sloped}.json"
+        write_text_atomic(rig, json.dumps(make_rig_document(offset_mm, top, group, slope), indent=1) + "\n")
         start = time.perf_counter()
         method = SimulatorFit(sensor=str(spec_path), num_rays=16, progress=False, rig=rig, drift=30.0, saturation_pa=SATURATION_PA, gains=GAINS)
-        fit_logs([logs[n] for n in names], folder / "fit", method=method, terms=2, mapping=mapping)
+        fit_logs([logs[n] for n in names], folder / "fit", method=method, terms=2, mapping=work / "mtl_mapping.json")
         (folder / "seconds.txt").write_text(f"{time.perf_counter() - start:.1f}\n")
+    report = json.loads((folder / "fit" / "report.json").read_text())
+    order = [name for names_ in GROUPS.values() for name in names_ if name in names]
+    return {"chi_square": report["chi_square"], "num_residuals": report["num_residuals"], "num_parameters": report["num_parameters"],
+            "long_term_modulus_Pa": report["long_term_modulus_Pa"], "prony_terms": report["prony_terms"], "offset_x_mm": 1e3 * report["rig"]["offset_x"]["value"],
+            "gains": {name.split("/")[-1]: value["value"] for name, value in report["gains"].items()},
+            "slopes": {name: report["rig"][f"slope_x[{k + 1}]"] for k, name in enumerate(order)} if slope is not None else None,
+            "seconds": float((folder / "seconds.txt").read_text()) if (folder / "seconds.txt").is_file() else None}
 
-    def summary(report):
-        return {"chi_square": report["chi_square"], "num_residuals": report["num_residuals"], "num_parameters": report["num_parameters"],
-                "long_term_modulus_Pa": report["long_term_modulus_Pa"], "prony_terms": report["prony_terms"], "offset_x_mm": 1e3 * report["rig"]["offset_x"]["value"],
-                "gains": {name.split("/")[-1]: value["value"] for name, value in report["gains"].items()}}
 
-    joint = summary(json.loads((folder / "fit" / "report.json").read_text()))
-    separate = {group: summary(json.loads((work / f"fit_{GAINS}_{group}" / "fit" / "report.json").read_text())) for group in GROUPS}
-    n = joint["num_residuals"]
-    bic = lambda chi, p: chi + p * np.log(n)
-    both = (sum(v["chi_square"] for v in separate.values()), sum(v["num_parameters"] for v in separate.values()))
-    return {"joint": joint | {"bic": bic(joint["chi_square"], joint["num_parameters"])}, "separate": separate,
+def joint_stage(spec_path: Path, logs: dict, work: Path, offset_mm: float) -> dict:
+    """Whether one material explains both states: the six logs fitted at once (one
+    rig: the x offset, the lag and each barometer's relative gain shared, a home per
+    log within both states' onsets) against the two groups' own fits, by χ² and BIC
+    (χ² + parameters × ln(residuals)); and again with the stage free to tilt against
+    the skin per log (`slope_x` within ±SLOPE: the vacuum pulling the skin down more
+    at one end than the other, a changed boundary), jointly and per state. Resumable
+    as the fit stage."""
+    from mtl_calibration import GROUPS
+
+    names = [name for group in GROUPS.values() for name in group]
+    found = {}
+    for slope in (None, SLOPE):
+        joint = _whole_fit(spec_path, logs, names, work, offset_mm, "both", slope)
+        separate = {group: _whole_fit(spec_path, logs, list(GROUPS[group]), work, offset_mm, group, slope) for group in GROUPS}
+        bic = lambda chi, p, n=joint["num_residuals"]: chi + p * np.log(n)
+        both = (sum(v["chi_square"] for v in separate.values()), sum(v["num_parameters"] for v in separate.values()))
+        found["level" if slope is None else "sloped"] = {
+            "joint": joint | {"bic": bic(joint["chi_square"], joint["num_parameters"])}, "separate": separate,
             "separate_bic": bic(*both), "separate_chi_square": both[0], "separate_num_parameters": both[1]}
+    return found["level"] | {"sloped": found["sloped"], "slope_bound": SLOPE}
 
 
 def joint_lines(joint: dict) -> list:
-    """The joint stage's table (markdown)."""
-    rows = [("both states, one material", joint["joint"]), *((f"{group} alone", value) for group, value in joint["separate"].items())]
-    lines = ["| fit | E∞ (MPa) | terms (MPa, s) | offset x (mm) | gains Sensor_0-3 | χ² | parameters |", "|---|---:|---|---:|---|---:|---:|"]
-    for label, value in rows:
-        terms = ", ".join(f"{t['modulus_Pa']['value'] / 1e6:.2f} @ {t['tau_s']['value']:.3g}" for t in value["prony_terms"])
-        gains = ", ".join(f"{value['gains'].get(c, 1.0):.2f}" for c in CHANNELS)
-        lines.append(f"| {label} | {value['long_term_modulus_Pa']['value'] / 1e6:.2f} | {terms} | {value['offset_x_mm']:.2f} | {gains} | {value['chi_square']:.4g} | {value['num_parameters']} |")
-    lines.append(f"\nBIC: one material {joint['joint']['bic']:.5g}, one per state {joint['separate_bic']:.5g} (lower is better).")
+    """The joint stage's table (markdown): level and, where run, tilted stages."""
+    lines = ["| stage | fit | E∞ (MPa) | terms (MPa, s) | offset x (mm) | gains Sensor_0-3 | slopes per log (mm/mm) | χ² | parameters |",
+             "|---|---|---:|---|---:|---|---|---:|---:|"]
+    cases = [("level", joint), *([("tilted", joint["sloped"])] if "sloped" in joint else [])]
+    for stage, case in cases:
+        for label, value in [("both states, one material", case["joint"]), *((f"{group} alone", value) for group, value in case["separate"].items())]:
+            terms = ", ".join(f"{t['modulus_Pa']['value'] / 1e6:.2f} @ {t['tau_s']['value']:.3g}" for t in value["prony_terms"])
+            gains = ", ".join(f"{value['gains'].get(c, 1.0):.2f}" for c in CHANNELS)
+            slopes = ", ".join(f"{s['value']:+.3f}" for s in value["slopes"].values()) if value.get("slopes") else "-"
+            lines.append(f"| {stage} | {label} | {value['long_term_modulus_Pa']['value'] / 1e6:.2f} | {terms} | {value['offset_x_mm']:.2f} | {gains} | {slopes} | "
+                         f"{value['chi_square']:.4g} | {value['num_parameters']} |")
+    for stage, case in cases:
+        lines.append(f"\nBIC, {stage}: one material {case['joint']['bic']:.5g}, one per state {case['separate_bic']:.5g} (lower is better).")
     return lines
 
 

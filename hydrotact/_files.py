@@ -17,15 +17,23 @@ def atomic_path(path, suffix: str | None = None):
     file (if any) untouched.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix or path.suffix)
+    if path.is_dir():
+        raise HydrotactError(f"{path}: is a folder, not a file; name the file to write")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix or path.suffix)
+    except OSError as error:  # a folder nobody may write in (/proc), a path under a file: name the output, not a temporary name
+        raise HydrotactError(f"{path}: cannot write in {path.parent}/ ({error.strerror or error})") from None
     os.close(fd)
     try:
         yield Path(tmp)
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
+        try:
+            os.replace(tmp, path)
+        except OSError as error:
+            raise HydrotactError(f"{path}: cannot be written ({error.strerror or error})") from None
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)

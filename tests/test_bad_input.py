@@ -318,7 +318,54 @@ def inputs(tmp_path_factory):
     (d / "rig_semicolon.csv").write_text((d / "rig.csv").read_text().replace(",", ";"))
     (d / "rig_decimal_comma.csv").write_text("t;p0;p1;z\n" + "".join(f"{k * 0.02:.2f};{101325 + 50 * (k % 7)};{101300 + 30 * (k % 5)};{0.0001 * (k % 9)}\n" for k in range(200)).replace(".", ","))
     (d / "afile").write_text("not a folder\n")
+    _write_models(d, baro)
     return d
+
+
+def _write_models(d, baro):
+    """An (untrained: the table checks what is read, not what is learnt) estimator of
+    pad5x5, and copies of it damaged in one way each; baro.parquet without its labels."""
+    import json
+    import shutil
+
+    import jax
+
+    from hydrotact.models import TrainConfig, TrainedEstimator, init_estimator, make_estimator_spec, save_estimator
+    from hydrotact.models._sequences import Normaliser
+    from hydrotact.sensors import load_sensor
+
+    sensor = load_sensor("pad5x5")
+    spec = make_estimator_spec(sensor, hidden=(8, 8))
+    channels = tuple(sensor.taxel_names)
+    normaliser = Normaliser(np.full(len(channels), 101325.0), np.full(len(channels), 500.0))
+    trained = TrainedEstimator(spec, init_estimator(spec, jax.random.PRNGKey(0)), normaliser, channels, TrainConfig(hidden=(8, 8)), [{"epoch": 0}], 0, "a test's stand-in")
+    save_estimator(trained, d / "model", "pad5x5")
+    document = json.loads((d / "model" / "model.json").read_text())
+
+    def damaged(name, change):
+        shutil.copytree(d / "model", d / f"model_{name}")
+        copy = json.loads(json.dumps(document))
+        change(copy)
+        _json(d / f"model_{name}" / "model.json", copy)
+
+    damaged("channels", lambda m: m.update(channels=m["channels"][:8]))  # a sphere8 model's eight names pasted in
+    damaged("no_spec", lambda m: m.pop("spec"))
+    damaged("architecture", lambda m: m["spec"].update(architecture="lstm"))
+    damaged("std_zero", lambda m: m["normaliser"].update(std_Pa=[0.0] * len(channels)))
+    damaged("best_epoch", lambda m: m.update(best_epoch=7))
+    damaged("format", lambda m: m.update(format="hydrotact.model"))
+    _json(d / "model_list.json", "[]")
+    shutil.copytree(d / "model", d / "model_not_json")
+    (d / "model_not_json" / "model.json").write_text('{"format": "hydrotact.estimator",')
+    shutil.copytree(d / "model", d / "model_no_weights")
+    (d / "model_no_weights" / "weights.npz").unlink()
+    shutil.copytree(d / "model", d / "model_nan")
+    with np.load(d / "model" / "weights.npz") as saved:
+        weights = {name: saved[name].copy() for name in saved.files}
+    weights["w0"].flat[0] = np.nan
+    np.savez(d / "model_nan" / "weights.npz", **weights)
+    labels = [name for name in ("fx", "fy", "fz", "fn", "contact", "theta", "phi") if name in baro.columns]
+    _variant(baro, d / "baro_unlabelled.parquet", drop=labels)
 
 
 SIM = "simulate --sensor pad5x5 --probe cylinder:d=2mm --rays 8"
@@ -538,6 +585,40 @@ CASES = [
     ("compare-tare", "compare {d}/nowhere {d}/lumped.parquet -o cmp --tare sometimes", REFUSED, ["--tare", "'sometimes'"]),
     ("compare-home", "compare {d}/nowhere {d}/lumped.parquet -o cmp --home guess", REFUSED, ["--home", "invalid choice: 'guess'"]),
     ("compare-out-is-file", "compare {d}/nowhere {d}/lumped.parquet -o {d}/afile", REFUSED, ["afile", "is a file, not a folder"]),
+    # evaluate, predict, export: models damaged, logs that do not fit, outputs that cannot be written
+    ("evaluate-no-model", "evaluate {d}/nowhere {d}/baro.parquet", REFUSED, ["nowhere", "model.json", "no such file"]),
+    ("evaluate-model-is-file", "evaluate {d}/afile {d}/baro.parquet", REFUSED, ["afile"]),
+    ("evaluate-model-channels", "evaluate {d}/model_channels {d}/baro.parquet", REFUSED, ["model_channels/model.json", "inputs disagree", "channels 8"]),
+    ("evaluate-model-no-spec", "evaluate {d}/model_no_spec {d}/baro.parquet", REFUSED, ["model_no_spec/model.json", "spec: is missing"]),
+    ("evaluate-model-architecture", "evaluate {d}/model_architecture {d}/baro.parquet", REFUSED, ["model.json", "spec.architecture", "lstm"]),
+    ("evaluate-model-std-zero", "evaluate {d}/model_std_zero {d}/baro.parquet", REFUSED, ["model.json", "normaliser.std_Pa", "> 0"]),
+    ("evaluate-model-best-epoch", "evaluate {d}/model_best_epoch {d}/baro.parquet", REFUSED, ["model.json", "best_epoch: 7", "1 epochs"]),
+    ("evaluate-model-format", "evaluate {d}/model_format {d}/baro.parquet", REFUSED, ["model.json", "not a hydrotact estimator", "hydrotact.model"]),
+    ("evaluate-model-not-json", "evaluate {d}/model_not_json {d}/baro.parquet", REFUSED, ["model_not_json/model.json", "not JSON"]),
+    ("evaluate-model-no-weights", "evaluate {d}/model_no_weights {d}/baro.parquet", REFUSED, ["model_no_weights/weights.npz"]),
+    ("evaluate-model-nan-weights", "evaluate {d}/model_nan {d}/baro.parquet", REFUSED, ["model_nan/weights.npz", "not finite"]),
+    ("evaluate-no-labels", "evaluate {d}/model {d}/baro_unlabelled.parquet", REFUSED, ["baro_unlabelled.parquet", "'fx'"]),
+    ("evaluate-other-sensor-log", "evaluate {d}/model {d}/lumped.parquet", REFUSED, ["lumped.parquet", "no channel", "the model reads"]),
+    ("evaluate-elastic-log", "evaluate {d}/model {d}/elastic.parquet", REFUSED, ["elastic.parquet", "absolute barometer readings"]),
+    ("evaluate-out-is-file", "evaluate {d}/model {d}/baro.parquet -o {d}/afile", REFUSED, ["afile", "is a file, not a folder"]),
+    ("evaluate-out-unwritable", "evaluate {d}/model {d}/baro.parquet -o /proc/evaluation", REFUSED, ["/proc/evaluation", "cannot write"]),
+    ("predict-out-csv", "predict {d}/model {d}/baro.parquet -o estimates.csv", REFUSED, ["estimates.csv", "*.parquet"]),
+    ("predict-out-unwritable", "predict {d}/model {d}/baro.parquet -o /proc/estimates.parquet", REFUSED, ["/proc/estimates.parquet", "cannot write"]),
+    ("predict-out-is-folder", "predict {d}/model {d}/baro.parquet -o afolder.parquet", REFUSED, ["afolder.parquet", "is a folder"]),
+    ("predict-no-log", "predict {d}/model {d}/nowhere.parquet -o estimates.parquet", REFUSED, ["nowhere.parquet"]),
+    ("predict-other-sensor-log", "predict {d}/model {d}/lumped.parquet -o estimates.parquet", REFUSED, ["lumped.parquet", "no channel"]),
+    ("predict-model-channels", "predict {d}/model_channels {d}/baro.parquet -o estimates.parquet", REFUSED, ["model.json", "inputs disagree"]),
+    ("export-proc", "export {d}/model -o /proc/model.h", REFUSED, ["/proc/model.h", "cannot write in /proc/"]),
+    ("export-onto-folder", "export {d}/model -o afolder.h", REFUSED, ["afolder.h", "is a folder"]),
+    ("export-not-a-header", "export {d}/model -o {d}", REFUSED, ["*.h"]),
+    ("export-nan-weights", "export {d}/model_nan -o model.h", REFUSED, ["model_nan/weights.npz", "not finite"]),
+    ("export-model-list", "export {d}/model_list.json -o model.h", REFUSED, ["model_list.json"]),
+    ("export-earlier-output-kept", "export {d}/model_no_spec -o earlier.h", REFUSED, ["spec: is missing"]),
+    ("export-format", "export {d}/model --format onnx -o model.h", REFUSED, ["--format", "'onnx'"]),
+    ("train-no-dataset", "train {d}/nowhere -o trained", REFUSED, ["nowhere"]),
+    ("train-dataset-is-a-log", "train {d}/baro.parquet -o trained", REFUSED, ["baro.parquet"]),
+    ("train-out-is-file", "train {d}/nowhere -o {d}/afile", REFUSED, ["afile", "is a file, not a folder"]),
+    ("train-out-unwritable", "train {d}/nowhere -o /proc/trained", REFUSED, ["/proc/trained", "cannot write"]),
     # demo
     ("demo-out-is-file", "demo -o {d}/afile", REFUSED, ["afile", "is a file, not a folder"]),
     ("demo-out-unwritable", "demo -o /proc/demo", REFUSED, ["/proc/demo", "cannot write"]),
@@ -560,6 +641,9 @@ SETUP = {  # cases whose working folder holds something first
     "sim-out-is-folder": lambda cwd: (cwd / "afolder.parquet").mkdir(),
     "mesh-earlier-output-kept": lambda cwd: (cwd / "earlier.vtu").write_bytes(EARLIER),
     "sim-earlier-output-kept": lambda cwd: (cwd / "earlier.parquet").write_bytes(EARLIER),
+    "predict-out-is-folder": lambda cwd: (cwd / "afolder.parquet").mkdir(),
+    "export-onto-folder": lambda cwd: (cwd / "afolder.h").mkdir(),
+    "export-earlier-output-kept": lambda cwd: (cwd / "earlier.h").write_bytes(EARLIER),
 }
 
 

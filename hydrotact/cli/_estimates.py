@@ -14,7 +14,22 @@ def recordings(model, sources, split: str):
             yield str(source), dataset.blocks(split), float(dataset.manifest["config"]["rate_hz"])
         else:
             log = read_log(source)
-            yield str(source), [log_block(model, log, source)], 1.0 / float(max(1e-9, (log.times[-1] - log.times[0]) / max(1, log.num_samples - 1)))
+            block = log_block(model, log, source)
+            _check_labels(model, block, source)
+            yield str(source), [block], 1.0 / float(max(1e-9, (log.times[-1] - log.times[0]) / max(1, log.num_samples - 1)))
+
+
+def _check_labels(model, columns, source) -> None:
+    """A log evaluated needs a label per target and the contact flag: one line naming
+    the first missing (not a KeyError halfway through)."""
+    from .._errors import HydrotactError
+    from ..models import LABEL_COLUMNS, label_column
+
+    for target in (*model.spec.targets, "contact"):
+        names = LABEL_COLUMNS.get(target, (target,))
+        if (label_column(target, columns) if target in LABEL_COLUMNS else target if target in columns else None) is None:
+            raise HydrotactError(f"{source}: no label for the estimator's {target!r} (a column {' or '.join(repr(n) for n in names)}): evaluate scores the estimates "
+                                 "against a log's labels; hydrotact predict estimates without them")
 
 
 def log_block(model, log, source) -> dict:

@@ -29,10 +29,12 @@ def add_parser(subparsers):
 def run(args) -> None:
     import json
 
-    from .._files import write_text_atomic
+    from .._files import check_output, write_text_atomic
     from ..models import calc_skin_radius, evaluate_estimator, load_estimator
     from ..sensors import load_sensor
 
+    if args.output is not None:
+        check_output(args.output, directory=True, what="the evaluation")
     model = load_estimator(args.model)
     document = json.loads((args.model / "model.json").read_text())
     sensor = load_sensor(document["sensor"])

@@ -21,8 +21,10 @@ def add_parser(subparsers):
 def run(args) -> None:
     import json
 
+    from .._files import check_output
     from ..models import export_c_header, load_estimator
 
+    check_output(args.output, suffixes=(".h",), what="the C header")
     model = load_estimator(args.model)
     sensor = json.loads((args.model / "model.json").read_text())["sensor"]
     print_report("exported estimator", export_c_header(model, args.output, sensor), args.json)

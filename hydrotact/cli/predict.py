@@ -24,9 +24,11 @@ def add_parser(subparsers):
 def run(args) -> None:
     import numpy as np
 
+    from .._files import check_output
     from ..data import BarometerLog, read_log, write_log
     from ..models import StreamingEstimator, load_estimator
 
+    check_output(args.output, suffixes=(".parquet",), what="the log with the estimates")
     model = load_estimator(args.model)
     log = read_log(args.log)
     columns = log_block(model, log, args.log)

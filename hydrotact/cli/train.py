@@ -70,6 +70,10 @@ def add_parser(subparsers):
 
 
 def run(args) -> None:
+    import shutil
+
+    from .._errors import HydrotactError
+    from .._files import check_output
     from ..datasets import load_dataset
     from ..models import TrainConfig, count_macs, count_parameters, save_estimator, train_estimator
     from ..sensors import load_sensor
@@ -80,10 +84,17 @@ def run(args) -> None:
         max_epochs=args.max_epochs, patience=args.patience, restore_best=not args.last_epoch, seed=args.seed,
         asinh_scale=args.asinh_scale, targets=args.targets,
     )
+    check_output(args.output, directory=True, what="the model")
     dataset = load_dataset(args.dataset)
     sensor = load_sensor(dataset.manifest["sensor"]["spec"])
+    created = not args.output.exists()
     args.output.mkdir(parents=True, exist_ok=True)
-    trained = train_estimator(dataset, sensor, config, folder=args.output, progress=not args.json)
+    try:
+        trained = train_estimator(dataset, sensor, config, folder=args.output, progress=not args.json)
+    except HydrotactError:
+        if created:  # a refused run leaves no folder behind (a killed one keeps its checkpoint to resume from)
+            shutil.rmtree(args.output, ignore_errors=True)
+        raise
     path = save_estimator(trained, args.output, sensor.name)
     plots = []
     if not args.no_plots:

@@ -11,6 +11,7 @@ import numpy as np
 
 from .._errors import HydrotactError
 from .._files import atomic_path, write_text_atomic
+from .._schemas import validate
 from ._estimator import EstimatorSpec, init_estimator
 from ._sequences import Normaliser
 from ._train import TrainConfig, TrainedEstimator
@@ -46,8 +47,21 @@ def load_estimator(folder) -> TrainedEstimator:
         raise HydrotactError(f"{path}: no such file (a model folder holds model.json and weights.npz, from hydrotact train)") from None
     except json.JSONDecodeError as error:
         raise HydrotactError(f"{path}: not JSON ({error.msg}, line {error.lineno})") from None
-    if document.get("format") != FORMAT:
-        raise HydrotactError(f"{path}: not a hydrotact estimator (format {document.get('format')!r})")
+    if not isinstance(document, dict) or document.get("format") != FORMAT:
+        raise HydrotactError(f"{path}: not a hydrotact estimator (format {document.get('format') if isinstance(document, dict) else None!r})")
+    if not isinstance(document.get("history"), list):
+        raise HydrotactError(f"{path}: history: must be a list of epochs")
+    validate(document | {"history": []}, "model", str(path))  # the history's metrics may be NaN (over no sample)
+    sizes = {"spec.num_inputs": document["spec"]["num_inputs"], "channels": len(document["channels"]), "normaliser.mean_Pa": len(document["normaliser"]["mean_Pa"]),
+             "normaliser.std_Pa": len(document["normaliser"]["std_Pa"]), **({"normaliser.rest_Pa": len(document["normaliser"]["rest_Pa"])} if "rest_Pa" in document["normaliser"] else {})}
+    if len(set(sizes.values())) > 1:
+        raise HydrotactError(f"{path}: the model's inputs disagree: " + ", ".join(f"{key} {value}" for key, value in sizes.items()) + " (one per channel read); the file was edited or damaged: retrain")
+    targets = document["spec"].get("targets", [])
+    for key in ("target_offsets", "target_scales"):
+        if key in document["spec"] and len(document["spec"][key]) != len(targets):
+            raise HydrotactError(f"{path}: spec.{key}: {len(document['spec'][key])} values for {len(targets)} targets")
+    if not 0 <= document["best_epoch"] < max(1, len(document["history"])):
+        raise HydrotactError(f"{path}: best_epoch: {document['best_epoch']}, but the history holds {len(document['history'])} epochs")
     spec = EstimatorSpec.from_json(document["spec"])
     like = init_estimator(spec, jax.random.PRNGKey(0))
     try:
