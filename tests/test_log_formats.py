@@ -631,7 +631,7 @@ def test_read_material_malformed(tmp_path):
 # --- schemas ----------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("name", ["barometer_log", "column_mapping", "material"])
+@pytest.mark.parametrize("name", ["barometer_log", "column_mapping", "material", "model"])
 def test_schema_documents(name):
     schema = load_schema(name)
     jsonschema.Draft202012Validator.check_schema(schema)
