@@ -64,7 +64,10 @@ into this repository: the committed results are the table and the figure.
 
 5. **One material for both states?** (`--stages joint`): the six logs fitted at once,
    the vacuum and non-vacuum logs sharing the material, the x offset, the lag and the
-   barometers' gains (a home per log), against each state's own fit, by χ² and BIC.
+   barometers' gains (a home per log), against each state's own fit, by χ² and BIC;
+   then all three again with the stage free to tilt against the skin per log (the
+   rig's `slope_x` within ±0.08: the vacuum as a changed geometry, the skin pulled
+   down more at one end).
 
 Outputs (in --output, default experiments/results/): `mtl_strip.json` (the sensor's
 alignment, the simulated profiles, the table), `mtl_strip.md` (the table of each
