@@ -97,6 +97,8 @@ def design_layout(
     region = make_feasible_region(mesh, placement, config.margin, config.spacing, config.max_tilt_deg, config.max_height)
     rng = np.random.default_rng(config.seed)
     starts = [region.random_layout(count, rng) for _ in range(config.restarts)]  # refuses an impossible count first
+    if not starts:  # no random start asked for: an impossible count, spacing or margin is still refused before any work
+        region.random_layout(count, np.random.default_rng(config.seed))
     compare = {name: (np.asarray(p, dtype=np.float64), np.asarray(a, dtype=np.float64)) for name, (p, a) in (compare or {}).items()}
     for name, (positions, axes) in compare.items():
         if positions.shape != (count, 3) or axes.shape != (count, 3):

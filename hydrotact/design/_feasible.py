@@ -259,7 +259,7 @@ class FeasibleRegion:
             where += f" no higher than {self.max_height * 1e3:.4g} mm above the board"
         raise HydrotactError(
             f"cannot place {count} barometers {self.spacing * 1e3:.3g} mm apart {where} at least {self.margin * 1e3:.3g} mm from its boundary: "
-            f"random packing found room for {most} at most; ask for fewer barometers, a smaller spacing or a smaller margin"
+            f"random packing found room for {most} at most; ask for fewer barometers (--barometers), a smaller spacing (--spacing) or a smaller margin (--margin)"
         )
 
 

@@ -55,7 +55,8 @@ def load_estimator(folder) -> TrainedEstimator:
     sizes = {"spec.num_inputs": document["spec"]["num_inputs"], "channels": len(document["channels"]), "normaliser.mean_Pa": len(document["normaliser"]["mean_Pa"]),
              "normaliser.std_Pa": len(document["normaliser"]["std_Pa"]), **({"normaliser.rest_Pa": len(document["normaliser"]["rest_Pa"])} if "rest_Pa" in document["normaliser"] else {})}
     if len(set(sizes.values())) > 1:
-        raise HydrotactError(f"{path}: the model's inputs disagree: " + ", ".join(f"{key} {value}" for key, value in sizes.items()) + " (one per channel read); the file was edited or damaged: retrain")
+        found = ", ".join(f"{key} {value}" for key, value in sizes.items())
+        raise HydrotactError(f"{path}: the model's inputs disagree: {found} (one per channel read); the file was edited or damaged: retrain")
     targets = document["spec"].get("targets", [])
     for key in ("target_offsets", "target_scales"):
         if key in document["spec"] and len(document["spec"][key]) != len(targets):

@@ -133,7 +133,9 @@ def calc_relaxation_band(result: FitResult, times, draws: int = 400, seed: int =
         terms = np.exp(x[:, 1 : 1 + count])[:, None, :] * np.exp(-times[None, :, None] / np.exp(x[:, 1 + count :])[:, None, :])
         return np.exp(x[:, 0])[:, None] + terms.sum(axis=-1)
 
-    with np.errstate(over="ignore", invalid="ignore"):  # a fit far from its data has a vast covariance: its band is then unbounded, not an error
+    # a fit far from its data has a vast covariance: its band is then unbounded (a draw
+    # of τ that underflows to 0 decays at once), not an error
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         curves = moduli(samples)
         return moduli(mean)[0], np.percentile(curves, 2.5, axis=0), np.percentile(curves, 97.5, axis=0)
 
