@@ -619,6 +619,10 @@ CASES = [
     ("train-dataset-is-a-log", "train {d}/baro.parquet -o trained", REFUSED, ["baro.parquet"]),
     ("train-out-is-file", "train {d}/nowhere -o {d}/afile", REFUSED, ["afile", "is a file, not a folder"]),
     ("train-out-unwritable", "train {d}/nowhere -o /proc/trained", REFUSED, ["/proc/trained", "cannot write"]),
+    # design: impossible constraints refused before any work, no .partial left
+    ("design-margin-wider-than-the-pad", "design --sensor pad5x5 --margin 0.02 --restarts 0 -o lay.json", REFUSED, ["cannot place 25 barometers", "--margin"]),
+    ("design-spacing-wider-than-the-pad", "design --sensor pad5x5 --spacing 0.05 -o lay.json", REFUSED, ["cannot place 25 barometers", "50 mm apart", "--spacing"]),
+    ("design-out-csv", "design --sensor pad5x5 -o lay.csv", REFUSED, ["lay.csv", "*.json"]),
     # demo
     ("demo-out-is-file", "demo -o {d}/afile", REFUSED, ["afile", "is a file, not a folder"]),
     ("demo-out-unwritable", "demo -o /proc/demo", REFUSED, ["/proc/demo", "cannot write"]),
