@@ -50,8 +50,10 @@ def run(args) -> None:
         print(f"{entry['source']}:{shift}")
         for name, c in entry["channels"].items():
             print(
-                f"  {name}: RMS {_fmt(c['rms_Pa'])} Pa (noise {_fmt(c['noise_Pa'])} Pa, prediction band {_fmt(c['prediction_std_Pa'])} Pa; "
-                f"normalized {_fmt(c['normalized_rms'])}), R² {_fmt(c['r2'], '.5f')}, hold shape RMS {_fmt(c['hold_shape_rms_Pa'])} Pa"
+                # the band is wide where the log presses and narrow at rest, so its RMS over the log says little of a
+                # sample's: the normalized error is each sample's over its own √(noise² + band²), then the RMS
+                f"  {name}: RMS {_fmt(c['rms_Pa'])} Pa (noise {_fmt(c['noise_Pa'])} Pa, prediction band RMS {_fmt(c['prediction_std_Pa'])} Pa; "
+                f"per sample, error / √(noise² + band²) RMS {_fmt(c['normalized_rms'])}), R² {_fmt(c['r2'], '.5f')}, hold shape RMS {_fmt(c['hold_shape_rms_Pa'])} Pa"
             )
     print(f"hydrotact compare: results in {args.output}/")
     for path in report["files"].values():

@@ -307,6 +307,15 @@ def _warn(output, manifest: dict, config: DatasetConfig) -> None:
             f"or --max-depth-fraction {config.max_depth_fraction:g} of the elastomer's thickness "
             f"and hold there (the material is softer than the force range needs; hold forces up to {stats['hold_force_N']['max']:.3g} N)"
         ), stacklevel=3)
+    # a barometer whose readings move no more than its noise: no contact of this regime reaches it (a receptive
+    # field that misses the skin pressed, a layout or regime to check); its column is noise for the estimator
+    floor = 1.5 * config.noise_rms + 1.0
+    dead = [name for name, std in zip(manifest["channels"], stats["channel_std_Pa"]) if std <= floor]
+    if dead:
+        warnings.warn(HydrotactWarning(
+            f"{output}: {len(dead)} of {len(manifest['channels'])} channels never respond over the {manifest['num_events']} events "
+            f"({', '.join(dead[:8])}{' ...' if len(dead) > 8 else ''}: a spread of at most {floor:.3g} Pa, the noise's): no press of this regime reaches them"
+        ), stacklevel=3)
     saturated = sum(stats["saturated_samples"])
     if saturated:
         warnings.warn(HydrotactWarning(f"{output}: {saturated} readings reached the barometer's range and read its limit (a real part clips so too)"), stacklevel=3)
