@@ -619,6 +619,8 @@ CASES = [
     ("train-dataset-is-a-log", "train {d}/baro.parquet -o trained", REFUSED, ["baro.parquet"]),
     ("train-out-is-file", "train {d}/nowhere -o {d}/afile", REFUSED, ["afile", "is a file, not a folder"]),
     ("train-out-unwritable", "train {d}/nowhere -o /proc/trained", REFUSED, ["/proc/trained", "cannot write"]),
+    # generate on a Ray cluster that is not there: refused at once (Ray's own init waited over 300 s), nothing written
+    ("generate-dead-ray", "generate --sensor pad5x5 --events 2 --ray 127.0.0.1:9 -o ds", REFUSED, ["--ray 127.0.0.1:9", "no Ray cluster answers at 127.0.0.1:9"]),
     # design: impossible constraints refused before any work, no .partial left
     ("design-margin-wider-than-the-pad", "design --sensor pad5x5 --margin 0.02 --restarts 0 -o lay.json", REFUSED, ["cannot place 25 barometers", "--margin"]),
     ("design-spacing-wider-than-the-pad", "design --sensor pad5x5 --spacing 0.05 -o lay.json", REFUSED, ["cannot place 25 barometers", "50 mm apart", "--spacing"]),

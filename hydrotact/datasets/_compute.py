@@ -215,10 +215,13 @@ class PoseEngine:
         except ImportError:
             raise HydrotactError("--ray: Ray is not installed; pip install 'hydrotact[ray]' (or run without --ray: every local device is used)") from None
         if not ray.is_initialized():
+            _check_reachable(address)
             try:
                 ray.init(address=address, logging_level="ERROR", log_to_driver=False)
-            except (ConnectionError, RuntimeError, ValueError) as error:
-                raise HydrotactError(f"--ray {address}: cannot connect to a Ray cluster ({error}); start one with 'ray start --head', or run without --ray") from None
+            except (ConnectionError, RuntimeError, ValueError):
+                # (Ray's own message may name another address: the one it read from a stale session file)
+                where = "no running Ray cluster was found on this machine" if address == "auto" else f"no Ray cluster answers at {address}"
+                raise HydrotactError(f"--ray {address}: {where}; start one with 'ray start --head', or run without --ray") from None
         host = lambda tree: jax.tree_util.tree_map(lambda leaf: np.asarray(leaf) if eqx.is_array(leaf) else leaf, tree)
         self._model_ref, self._probe_ref = ray.put(host(self.model)), ray.put(host(self.probe))
         self._remote = ray.remote(num_cpus=1)(_ray_task)
@@ -241,3 +244,29 @@ class PoseEngine:
         futures = [self._remote.remote(self._model_ref, self._probe_ref, slices[start : start + per_task], starts[start : start + per_task], x64) for start in range(0, len(slices), per_task)]
         pieces = ray.get(futures)
         return {name: np.concatenate([piece[name] for piece in pieces]).reshape(-1, *pieces[0][name].shape[2:])[: len(rows)] for name in _FIELDS}
+
+
+RAY_CONNECT_TIMEOUT_S = 10.0
+
+
+def _check_reachable(address: str) -> None:
+    """Refuse at once an address (HOST:PORT or ray://HOST:PORT) where nothing listens:
+    Ray's own init waits minutes for a cluster that is not there (measured: over 300 s
+    for 127.0.0.1:6390, 2026-12-06)."""
+    import re
+    import socket
+
+    from .._errors import HydrotactError
+
+    found = re.fullmatch(r"(?:ray://)?\[?([^\]/]+?)\]?:(\d+)", address.strip())
+    if found is None:
+        return  # "auto", "local": Ray finds (or refuses) the cluster itself
+    host, port = found.group(1), int(found.group(2))
+    try:
+        with socket.create_connection((host, port), timeout=RAY_CONNECT_TIMEOUT_S):
+            pass
+    except OSError as error:
+        raise HydrotactError(
+            f"--ray {address}: no Ray cluster answers at {host}:{port} ({error.strerror or error}, within {RAY_CONNECT_TIMEOUT_S:g} s); "
+            "start one with 'ray start --head --port PORT', or run without --ray"
+        ) from None

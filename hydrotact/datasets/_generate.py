@@ -201,17 +201,20 @@ def generate_dataset(sensor, output, *, material=None, modulus=None, config: Dat
     request_digest = digest(json.dumps(request, sort_keys=True))
     status = prepare_folder(output, request_digest)
     output = Path(output)
+    if ray_address is not None and status != "complete":
+        from ._compute import _check_reachable
+
+        _check_reachable(ray_address)  # before the sensor's fields are built: a cluster not there is refused in seconds
     if status == "complete":
         return read_manifest(output) | {"status": "complete", "elapsed_s": time.perf_counter() - started}
-    partial = start_state(output, request_digest, request)
-
     model = make_sensor_model(spec, num_rays=config.num_rays)
     model, position_offsets = _jitter_layout(model, spec, config.position_jitter, sensor_rng)
     barometer = BarometerSettings(seed=int(sensor_rng.integers(2**31)), noise_rms=config.noise_rms, gain_spread=config.gain_spread, offset_spread=config.offset_spread)
     signal, _ = barometer.draw(spec.part, spec.num_taxels)
     key = jax.random.PRNGKey(int(noise_rng.integers(2**31)))
     plan = sample_events(find_touchable_skin(spec, spec.make_mesh(check=False)), config, events_rng)
-    engine = PoseEngine(model, probe, ray_address)
+    engine = PoseEngine(model, probe, ray_address)  # a Ray cluster that does not answer is refused here, before anything is written
+    partial = start_state(output, request_digest, request)
     with tqdm(total=plan.num_events * (ROUND_ESTIMATE + 1) + 1, unit="pose", desc=f"generating {spec.name} ({plan.num_events} events, {engine.description})", disable=not progress) as bar:
         bar.set_postfix_str("compiling the contact kernels", refresh=True)
 
