@@ -107,3 +107,28 @@ def test_the_lumped_fit_plots_keep_the_curve_and_the_histogram_in_view(monkeypat
     press._residual_panels(["a", "b", "c"], residuals, "residuals.png", "residuals")
     low, high = figures[-1].axes[1].get_ylim()
     assert low == 1e-5 and 0.4 < high < 2.0
+
+
+def test_the_training_curve_has_whole_epochs_and_plain_loss_ticks(monkeypatch):
+    """A loss within one decade (13.6 to 16) on the log axis has only minor ticks, which
+    matplotlib labelled 1.36×10^1; 12 epochs were ticked at 2.5, 7.5; a position
+    target's metrics had no panel."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    import hydrotact.viz._training as training
+
+    found = []
+    monkeypatch.setattr(training, "save_figure", lambda figure, path: found.append(figure))
+    history = [{"epoch": k, "train_loss": 16.0 - 0.2 * k, "validation_loss": 15.5 - 0.15 * k,
+                "validation_metrics": {"contact_bce": 0.3 - 0.01 * k, "x_rmse": 2e-3 - 1e-4 * k, "depth_rmse": 4e-4}} for k in range(12)]
+    training.plot_training_curve(history, "unused.png", best_epoch=9, title="test")
+    [figure] = found
+    FigureCanvasAgg(figure).draw()
+    assert [axis.get_title() for axis in figure.axes] == ["test", "position", "contact"]
+    loss = figure.axes[0]
+    labels = [label.get_text() for label in loss.get_yticklabels(minor=True) + loss.get_yticklabels() if label.get_text()]
+    assert labels and all("10^" not in text and "times" not in text and "×" not in text for text in labels), labels
+    for axis in figure.axes:
+        ticks = [tick for tick in axis.get_xticks() if axis.get_xlim()[0] <= tick <= axis.get_xlim()[1]]
+        assert ticks and all(float(tick).is_integer() for tick in ticks), ticks
+    figure.clf()
