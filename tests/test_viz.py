@@ -132,3 +132,29 @@ def test_the_training_curve_has_whole_epochs_and_plain_loss_ticks(monkeypatch):
         ticks = [tick for tick in axis.get_xticks() if axis.get_xlim()[0] <= tick <= axis.get_xlim()[1]]
         assert ticks and all(float(tick).is_integer() for tick in ticks), ticks
     figure.clf()
+
+
+def test_contact_detection_draws_the_true_flag_as_a_strip_not_a_force(monkeypatch):
+    """The true contact flag was a line at 0 to -0.04 of the force axis, read as a
+    force of ~0.02 N; it is a strip along the axis' bottom (its height the axis', not
+    newtons) where the flag is set, and the force axis starts at 0."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    import hydrotact.viz._estimator as estimator
+
+    found = []
+    monkeypatch.setattr(estimator, "save_figure", lambda figure, path: found.append(figure))
+    times = np.arange(200) / 50.0
+    contact = ((times > 1.0) & (times < 2.5)).astype(float)
+    force = 0.8 * contact * np.sin(np.pi * (times - 1.0) / 1.5).clip(0.0)
+    estimator.plot_contact_detection(times, force, contact, 0.9 * contact, force, "unused.png")
+    [figure] = found
+    FigureCanvasAgg(figure).draw()
+    for axis in figure.axes:
+        assert axis.get_ylim()[0] == 0.0
+        labels = [line.get_label() for line in axis.get_lines()]
+        assert not any("flag" in label for label in labels), labels
+        [strip] = [c for c in axis.collections if c.get_label() == "true contact"]
+        heights = np.concatenate([path.vertices[:, 1] for path in strip.get_paths()])
+        assert strip.get_transform() == axis.get_xaxis_transform() and set(np.round(heights, 9)) <= {0.0, 0.06}  # x in seconds, height in the axis' fraction
+    figure.clf()

@@ -43,7 +43,8 @@ def plot_contact_detection(times, force, contact, probability, predicted_force, 
     """The true |F| over time with the samples each detector calls contact shaded: the
     contact head (probability over 0.5) above, the predicted |F| over `threshold` N
     below (none where `predicted_force` is None: an estimator without the forces);
-    the true contact flag as a line under each. `signal` names what `force` is (a
+    the true contact as a strip along the bottom of each (in the axis' height, not in
+    the signal's units: it is a flag, not a force). `signal` names what `force` is (a
     stage log without forces draws its depth: "depth (mm)")."""
     times = np.asarray(times) - float(np.asarray(times)[0])
     force = np.nan_to_num(np.asarray(force, dtype=float))
@@ -56,7 +57,9 @@ def plot_contact_detection(times, force, contact, probability, predicted_force, 
         axis.plot(times, force, color="k", linewidth=0.8, label=f"true {signal.split(' (')[0]}")
         top = max(float(np.max(force)), 1e-6) * 1.05
         axis.fill_between(times, 0.0, top, where=detected, color="tab:orange", alpha=0.3, step="mid", label=f"detected: {name}")
-        axis.plot(times, -0.04 * top * (1 - np.asarray(contact)), color="tab:blue", linewidth=0.8, label="true flag (low: no contact)")
+        axis.fill_between(times, 0.0, 0.06, where=np.asarray(contact) > 0, transform=axis.get_xaxis_transform(), color="tab:blue", alpha=0.7, step="mid",
+                          linewidth=0, label="true contact")
+        axis.set_ylim(bottom=0.0)
         axis.set_ylabel(signal)
         axis.legend(fontsize=7, loc="upper right")
     axes[-1].set_xlabel("time (s)")
