@@ -158,3 +158,26 @@ def test_contact_detection_draws_the_true_flag_as_a_strip_not_a_force(monkeypatc
         heights = np.concatenate([path.vertices[:, 1] for path in strip.get_paths()])
         assert strip.get_transform() == axis.get_xaxis_transform() and set(np.round(heights, 9)) <= {0.0, 0.06}  # x in seconds, height in the axis' fraction
     figure.clf()
+
+
+@pytest.mark.parametrize("panels", [1, 4])
+def test_the_error_map_keeps_its_axis_labels_inside_the_picture(monkeypatch, panels):
+    """One panel's θ label fell off the left edge (a margin of 6 % of the width)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    import hydrotact.viz._estimator as estimator
+
+    found = []
+    monkeypatch.setattr(estimator, "save_figure", lambda figure, path: found.append(figure))
+    edges = np.radians(np.linspace(0.0, 90.0, 7)), np.radians(np.linspace(-180.0, 180.0, 13))
+    entry = {"unit": "m", "theta_edges": edges[0], "phi_edges": edges[1], "mean": np.full((6, 12), 1e-3), "count": np.ones((6, 12))}
+    estimator.plot_error_maps({f"model {k}": entry for k in range(panels)}, "unused.png", title="test")
+    [figure] = found
+    canvas = FigureCanvasAgg(figure)
+    canvas.draw()
+    renderer, width = canvas.get_renderer(), figure.bbox.width
+    for axis in figure.axes[:panels]:
+        for label in (axis.yaxis.label, axis.xaxis.label, *axis.get_yticklabels()):
+            box = label.get_window_extent(renderer)
+            assert label.get_text() and 0.0 <= box.x0 and box.x1 <= width, (label.get_text(), box)
+    figure.clf()

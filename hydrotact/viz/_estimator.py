@@ -20,8 +20,10 @@ def plot_error_maps(maps: dict, path, title: str = "") -> None:
     top = float(finite.max()) or 1.0
     columns = min(4, len(labels))
     rows = -(-len(labels) // columns)
-    figure, axes = new_figure(rows, columns, figsize=(3.8 * columns + 1.2, 2.9 * rows + 0.8), squeeze=False)
-    figure.subplots_adjust(left=0.06, right=0.86, bottom=0.12, top=0.82, wspace=0.35, hspace=0.6)
+    width = 3.8 * columns + 1.2
+    figure, axes = new_figure(rows, columns, figsize=(width, 2.9 * rows + 0.8), squeeze=False)
+    # margins in inches, not fractions: 6 % of a one-panel figure cut the θ label off
+    figure.subplots_adjust(left=0.75 / width, right=1.0 - 1.3 / width, bottom=0.12, top=0.82, wspace=0.35, hspace=0.6)
     image = None
     for axis, label, value in zip(axes.flat, labels, values):
         entry = maps[label]
