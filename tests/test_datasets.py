@@ -530,3 +530,22 @@ def test_randomised_material_is_drawn_from_the_covariance_and_recorded(material_
     no_spread = {key: value for key, value in document.items() if key != "covariance"}
     with pytest.raises(HydrotactError, match="covariance or standard deviations"):
         draw_material(no_spread, np.random.default_rng(0), "plain.json")
+
+
+def test_batches_read_back_from_a_killed_runs_checkpoint_are_told_apart(tmp_path):
+    """A resumed run's progress counts the batches it reads back apart from those it
+    computes (its rate was the read-back's, its bar silent about resuming)."""
+    from hydrotact.datasets._session import _Rounds
+
+    computed = []
+
+    class Engine:
+        def compute(self, rows, needs):
+            computed.append(len(rows))
+            return {"value": rows.astype(np.float64).sum(axis=1)}
+
+    seen = []
+    rows, needs = np.arange(12).reshape(6, 2), np.zeros((6, 6))
+    _Rounds(Engine(), tmp_path, lambda n, restored: seen.append((n, restored))).add(rows, needs)
+    _Rounds(Engine(), tmp_path, lambda n, restored: seen.append((n, restored))).add(rows, needs)
+    assert seen == [(6, False), (6, True)] and computed == [6]

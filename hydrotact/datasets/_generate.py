@@ -215,11 +215,20 @@ def generate_dataset(sensor, output, *, material=None, modulus=None, config: Dat
     plan = sample_events(find_touchable_skin(spec, spec.make_mesh(check=False)), config, events_rng)
     engine = PoseEngine(model, probe, ray_address)  # a Ray cluster that does not answer is refused here, before anything is written
     partial = start_state(output, request_digest, request)
-    with tqdm(total=plan.num_events * (ROUND_ESTIMATE + 1) + 1, unit="pose", desc=f"generating {spec.name} ({plan.num_events} events, {engine.description})", disable=not progress) as bar:
+    doing = "resuming" if status == "resume" else "generating"
+    with tqdm(total=plan.num_events * (ROUND_ESTIMATE + 1) + 1, unit="pose", desc=f"{doing} {spec.name} ({plan.num_events} events, {engine.description})", disable=not progress) as bar:
         bar.set_postfix_str("compiling the contact kernels", refresh=True)
 
-        def on_poses(count):
-            bar.set_postfix_str("", refresh=False)
+        restored = [0]
+
+        def on_poses(count, from_checkpoint=False):
+            if from_checkpoint:  # read back, not computed: counted, but kept out of the rate
+                restored[0] += count
+                bar.n += count
+                bar.last_print_n = bar.n
+                bar.set_postfix_str(f"resuming: {restored[0]} poses read back from {partial.name}/", refresh=True)
+                return
+            bar.set_postfix_str(f"{restored[0]} read back" if restored[0] else "", refresh=False)
             bar.update(count)
 
         def on_round(active, to_go):

@@ -96,12 +96,12 @@ class _Rounds:
     def _batch(self, rows: np.ndarray, needs) -> dict:
         number = len(self.rows)
         path = None if self.folder is None else self.folder / f"batch-{number:05d}.npz"
-        result = None
+        result, restored = None, False
         if path is not None and path.is_file():
             try:
                 with np.load(path, allow_pickle=False) as saved:
                     if saved["rows"].shape == rows.shape and np.array_equal(saved["rows"], rows):
-                        result = {name: saved[name] for name in saved.files if name != "rows"}
+                        result, restored = {name: saved[name] for name in saved.files if name != "rows"}, True
             except (OSError, ValueError, KeyError, EOFError):
                 result = None  # unreadable: compute again
         if result is None:
@@ -110,7 +110,7 @@ class _Rounds:
                 with atomic_path(path, suffix=".npz") as tmp:
                     np.savez(tmp, rows=rows, **result)
         if self.on_poses is not None:
-            self.on_poses(len(rows))
+            self.on_poses(len(rows), restored)
         self.rows.append(rows)
         self.parts.append(result)
         return result
@@ -164,7 +164,8 @@ def _predicted_needs(needs: list, first: int, count: int) -> np.ndarray:
 def march_presses(engine, plan: EventPlan, config: DatasetConfig, modulus: float, folder: Path | None = None, on_poses=None, on_round=None) -> Presses:
     """March every event's approach until its target force (see the module), then
     compute the holds and the no-contact pose. `folder` keeps each batch's responses
-    (resumable); `on_poses(n)` after each batch of n poses; `on_round(active,
+    (resumable); `on_poses(n, restored)` after each batch of n poses (`restored`:
+    read back from `folder`, not computed); `on_round(active,
     poses_to_go)` after each round, with a prediction of the poses still to compute."""
     count = plan.num_events
     steps = plan.speeds / config.rate_hz
