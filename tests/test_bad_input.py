@@ -624,6 +624,7 @@ CASES = [
     # design: impossible constraints refused before any work, no .partial left
     ("design-margin-wider-than-the-pad", "design --sensor pad5x5 --margin 0.02 --restarts 0 -o lay.json", REFUSED, ["cannot place 25 barometers", "--margin"]),
     ("design-spacing-wider-than-the-pad", "design --sensor pad5x5 --spacing 0.05 -o lay.json", REFUSED, ["cannot place 25 barometers", "50 mm apart", "--spacing"]),
+    ("design-other-count-no-start", "design --sensor pad5x5 --barometers 9 --restarts 0 -o lay.json", REFUSED, ["--restarts 0", "--barometers 9", "of 25 barometers"]),
     ("design-out-csv", "design --sensor pad5x5 -o lay.csv", REFUSED, ["lay.csv", "*.json"]),
     # demo
     ("demo-out-is-file", "demo -o {d}/afile", REFUSED, ["afile", "is a file, not a folder"]),

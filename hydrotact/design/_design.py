@@ -99,6 +99,11 @@ def design_layout(
     starts = [region.random_layout(count, rng) for _ in range(config.restarts)]  # refuses an impossible count first
     if not starts:  # no random start asked for: an impossible count, spacing or margin is still refused before any work
         region.random_layout(count, np.random.default_rng(config.seed))
+        if count != spec.num_taxels:
+            raise HydrotactError(
+                f"--restarts 0 with --barometers {count}: the only start without random ones is the sensor's own layout, of {spec.num_taxels} barometers; "
+                f"ask for {spec.num_taxels} barometers, or for random starts (--restarts 1 or more)"
+            )
     compare = {name: (np.asarray(p, dtype=np.float64), np.asarray(a, dtype=np.float64)) for name, (p, a) in (compare or {}).items()}
     for name, (positions, axes) in compare.items():
         if positions.shape != (count, 3) or axes.shape != (count, 3):
