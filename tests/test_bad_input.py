@@ -619,6 +619,21 @@ CASES = [
     ("train-dataset-is-a-log", "train {d}/baro.parquet -o trained", REFUSED, ["baro.parquet"]),
     ("train-out-is-file", "train {d}/nowhere -o {d}/afile", REFUSED, ["afile", "is a file, not a folder"]),
     ("train-out-unwritable", "train {d}/nowhere -o /proc/trained", REFUSED, ["/proc/trained", "cannot write"]),
+    # generate: every setting checked before any work, named by its option
+    ("generate-events-zero", "generate --sensor pad5x5 --events 0 -o ds", REFUSED, ["--events", "got 0"]),
+    ("generate-stage-with-tilt", "generate --sensor pad5x5 --regime stage --max-tilt 10 -o ds", REFUSED, ["--max-tilt", "--regime stage"]),
+    ("generate-regime-unknown", "generate --sensor pad5x5 --regime orbit -o ds", REFUSED, ["--regime", "'orbit'"]),
+    ("generate-speed-range-backwards", "generate --sensor pad5x5 --speed-range 0.02,0.01 -o ds", REFUSED, ["--speed-range", "LOW <= HIGH"]),
+    ("generate-hold-negative", "generate --sensor pad5x5 --hold-range -1,2 -o ds", REFUSED, ["--hold-range"]),
+    ("generate-rate-zero", "generate --sensor pad5x5 --rate 0 -o ds", REFUSED, ["--rate:", "1-10000 Hz"]),
+    ("generate-rays-zero", "generate --sensor pad5x5 --rays 0 -o ds", REFUSED, ["--rays:", "1-4096"]),
+    ("generate-test-fraction", "generate --sensor pad5x5 --test-fraction 1.5 -o ds", REFUSED, ["--test-fraction", "0-0.9"]),
+    ("generate-noise-negative", "generate --sensor pad5x5 --noise -1 -o ds", REFUSED, ["--noise", "-1 Pa"]),
+    ("generate-stage-x-backwards", "generate --sensor pad5x5 --regime stage --stage-x-range 5,1 -o ds", REFUSED, ["--stage-x-range", "LOW <= HIGH"]),
+    ("generate-shard-rows", "generate --sensor pad5x5 --shard-rows 0 -o ds", REFUSED, ["--shard-rows", "at least 100"]),
+    ("generate-out-is-file", "generate --sensor pad5x5 -o {d}/afile", REFUSED, ["afile", "is a file, not a folder"]),
+    ("generate-foreign-folder", "generate --sensor pad5x5 -o {d}", REFUSED, ["not part of a hydrotact dataset"]),
+    ("generate-unknown-sensor", "generate --sensor pad6x6 -o ds", REFUSED, ["pad6x6"]),
     # generate on a Ray cluster that is not there: refused at once (Ray's own init waited over 300 s), nothing written
     ("generate-dead-ray", "generate --sensor pad5x5 --events 2 --ray 127.0.0.1:9 -o ds", REFUSED, ["--ray 127.0.0.1:9", "no Ray cluster answers at 127.0.0.1:9"]),
     # design: impossible constraints refused before any work, no .partial left

@@ -127,8 +127,11 @@ class DatasetConfig:
         return cls(**{key: (tuple(value) if isinstance(value, list) else value) for key, value in document.items() if key in names})
 
 
+OPTIONS = {"rate_hz": "--rate", "num_rays": "--rays"}  # fields whose command-line option is not their name
+
+
 def _option(name: str) -> str:
-    return "--" + name.replace("_", "-")
+    return OPTIONS.get(name, "--" + name.replace("_", "-"))
 
 
 def _check_range(config, name: str, low_limit: float, high_limit: float = math.inf, unit: str = "") -> None:
