@@ -321,7 +321,7 @@ def _warn(output, manifest: dict, config: DatasetConfig) -> None:
         ), stacklevel=3)
     # a barometer whose readings move no more than its noise: no contact of this regime reaches it (a receptive
     # field that misses the skin pressed, a layout or regime to check); its column is noise for the estimator
-    floor = 1.5 * config.noise_rms + 1.0
+    floor = 1.5 * manifest["sensor_variation"]["noise_rms_Pa"] + 1.0  # the noise drawn (the part's where --noise is not given)
     dead = [name for name, std in zip(manifest["channels"], stats["channel_std_Pa"]) if std <= floor]
     if dead:
         warnings.warn(HydrotactWarning(
