@@ -75,6 +75,23 @@ def check_output(path, *, directory: bool = False, suffixes: tuple[str, ...] = (
     return path
 
 
+@contextlib.contextmanager
+def removed_if_refused(folder):
+    """Run a job that writes into `folder`: if the job is refused (a HydrotactError)
+    and the folder was not there before it, the folder goes too, so a refused run
+    leaves nothing behind; a folder that was there (a killed run's state to resume
+    from, an earlier output) is kept."""
+    import shutil
+
+    existed = Path(folder).exists()
+    try:
+        yield
+    except HydrotactError:
+        if not existed:
+            shutil.rmtree(folder, ignore_errors=True)
+        raise
+
+
 def write_text_atomic(path, text: str) -> None:
     with atomic_path(path) as tmp:
         tmp.write_text(text)

@@ -106,6 +106,29 @@ def test_output_is_not_touched_on_error(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mesh.vtu"]
 
 
+def test_a_refused_job_removes_the_folder_it_made_and_keeps_one_that_was_there(tmp_path):
+    """train's model folder and design's .partial/: a refused run leaves nothing it
+    made, and never removes a folder that was there (a killed run's state, earlier output)."""
+    from hydrotact._files import removed_if_refused
+
+    for existed in (False, True):
+        folder = tmp_path / f"existed-{existed}"
+        if existed:
+            folder.mkdir()
+            (folder / "checkpoint.npz").write_bytes(b"earlier")
+        with pytest.raises(HydrotactError, match="refused"), removed_if_refused(folder):
+            folder.mkdir(exist_ok=True)
+            (folder / "weights.npz").write_bytes(b"half-written")
+            raise HydrotactError("refused")
+        assert folder.exists() == existed
+        if existed:
+            assert (folder / "checkpoint.npz").read_bytes() == b"earlier"
+    with pytest.raises(KeyboardInterrupt), removed_if_refused(tmp_path / "killed"):  # not a refusal: kept to resume
+        (tmp_path / "killed").mkdir()
+        raise KeyboardInterrupt
+    assert (tmp_path / "killed").is_dir()
+
+
 def _write_raw_vtu(path, vertices, tets):
     """Write a mesh file without hydrotact's checks (to feed it bad meshes)."""
     import pyvista as pv

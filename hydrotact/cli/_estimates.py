@@ -23,11 +23,11 @@ def _check_labels(model, columns, source) -> None:
     """A log evaluated needs a label per target and the contact flag: one line naming
     the first missing (not a KeyError halfway through)."""
     from .._errors import HydrotactError
-    from ..models import LABEL_COLUMNS, label_column
+    from ..models import LABEL_COLUMNS
 
     for target in (*model.spec.targets, "contact"):
         names = LABEL_COLUMNS.get(target, (target,))
-        if (label_column(target, columns) if target in LABEL_COLUMNS else target if target in columns else None) is None:
+        if not any(name in columns for name in names):
             raise HydrotactError(f"{source}: no label for the estimator's {target!r} (a column {' or '.join(repr(n) for n in names)}): evaluate scores the estimates "
                                  "against a log's labels; hydrotact predict estimates without them")
 

@@ -75,8 +75,7 @@ def run(args) -> None:
     import json
     import shutil
 
-    from .._errors import HydrotactError
-    from .._files import check_output, write_text_atomic
+    from .._files import check_output, removed_if_refused, write_text_atomic
     from ..datasets import DatasetConfig
     from ..design import DesignConfig, design_layout
     from ..design._config import OBJECTIVE_DESCRIPTIONS, OBJECTIVE_SCORES
@@ -94,15 +93,10 @@ def run(args) -> None:
         regime["depth_range"] = args.depth_range
     regime = DatasetConfig(**regime)
     partial = output.with_name(output.name + ".partial")
-    resuming = partial.exists()
-    try:
+    with removed_if_refused(partial):  # a killed run keeps its finished starts to resume
         design = design_layout(
             args.sensor, args.barometers, config=config, regime=regime, material=args.material, modulus=args.modulus, checkpoint=partial, progress=not args.json
         )
-    except HydrotactError:
-        if not resuming:  # a refused request leaves nothing behind (a killed run keeps its finished starts to resume)
-            shutil.rmtree(partial, ignore_errors=True)
-        raise
     write_text_atomic(output, document_text(design.spec))
     stem = output.with_suffix("")
     scores = {"designed": design.designed} | ({"built-in": design.builtin} if design.builtin is not None else {})

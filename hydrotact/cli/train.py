@@ -70,10 +70,7 @@ def add_parser(subparsers):
 
 
 def run(args) -> None:
-    import shutil
-
-    from .._errors import HydrotactError
-    from .._files import check_output
+    from .._files import check_output, removed_if_refused
     from ..datasets import load_dataset
     from ..models import TrainConfig, count_macs, count_parameters, save_estimator, train_estimator
     from ..sensors import load_sensor
@@ -87,14 +84,9 @@ def run(args) -> None:
     check_output(args.output, directory=True, what="the model")
     dataset = load_dataset(args.dataset)
     sensor = load_sensor(dataset.manifest["sensor"]["spec"])
-    created = not args.output.exists()
-    args.output.mkdir(parents=True, exist_ok=True)
-    try:
+    with removed_if_refused(args.output):  # a killed run keeps its checkpoint to resume from
+        args.output.mkdir(parents=True, exist_ok=True)
         trained = train_estimator(dataset, sensor, config, folder=args.output, progress=not args.json)
-    except HydrotactError:
-        if created:  # a refused run leaves no folder behind (a killed one keeps its checkpoint to resume from)
-            shutil.rmtree(args.output, ignore_errors=True)
-        raise
     path = save_estimator(trained, args.output, sensor.name)
     plots = []
     if not args.no_plots:
