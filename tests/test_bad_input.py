@@ -342,7 +342,33 @@ def inputs(tmp_path_factory):
     (d / "rig_decimal_comma.csv").write_text("t;p0;p1;z\n" + "".join(f"{k * 0.02:.2f};{101325 + 50 * (k % 7)};{101300 + 30 * (k % 5)};{0.0001 * (k % 9)}\n" for k in range(200)).replace(".", ","))
     (d / "afile").write_text("not a folder\n")
     _write_models(d, baro)
+    _write_datasets(d)
     return d
+
+
+def _write_datasets(d):
+    """The recorded two-event sphere8 dataset (tests/data/tiny_dataset), and copies of
+    it damaged in one way each."""
+    import json
+    import shutil
+    from pathlib import Path
+
+    recorded = Path(__file__).parent / "data" / "tiny_dataset"
+    for name in ("dataset", "ds_split", "ds_no_shard", "ds_bad_sha", "ds_unfinished", "ds_garbage"):
+        shutil.copytree(recorded, d / name)
+
+    def edit(name, change):
+        document = json.loads((d / name / "manifest.json").read_text())
+        change(document)
+        _json(d / name / "manifest.json", document)
+
+    edit("ds_split", lambda m: m["split"].update(train=[[0, 5000]]))  # a manifest edited by hand
+    edit("ds_bad_sha", lambda m: m["shards"][0].update(sha256="0" * 64))  # a shard changed since
+    (d / "ds_no_shard" / "shard-00000.parquet").unlink()
+    (d / "ds_unfinished" / "manifest.json").unlink()  # a run killed before its end
+    (d / "ds_unfinished" / ".partial").mkdir()
+    _json(d / "ds_unfinished" / ".partial" / "state.json", {"request_digest": "another run's"})
+    (d / "ds_garbage" / "manifest.json").write_text('{"format": ')
 
 
 def _write_models(d, baro):
@@ -642,6 +668,19 @@ CASES = [
     ("train-dataset-is-a-log", "train {d}/baro.parquet -o trained", REFUSED, ["baro.parquet"]),
     ("train-out-is-file", "train {d}/nowhere -o {d}/afile", REFUSED, ["afile", "is a file, not a folder"]),
     ("train-out-unwritable", "train {d}/nowhere -o /proc/trained", REFUSED, ["/proc/trained", "cannot write"]),
+    # train on a dataset folder that is damaged, or with settings it cannot take: refused before a model folder is made
+    ("train-split-past-rows", "train {d}/ds_split -o trained", REFUSED, ["ds_split/manifest.json", "split.train[0]", "875 rows"]),
+    ("train-shard-missing", "train {d}/ds_no_shard -o trained", REFUSED, ["ds_no_shard/shard-00000.parquet", "missing"]),
+    ("train-shard-changed", "train {d}/ds_bad_sha -o trained", REFUSED, ["ds_bad_sha/shard-00000.parquet", "SHA-256"]),
+    ("train-unfinished-dataset", "train {d}/ds_unfinished -o trained", REFUSED, ["ds_unfinished", "no manifest.json", "has not finished"]),
+    ("train-manifest-not-json", "train {d}/ds_garbage -o trained", REFUSED, ["ds_garbage/manifest.json", "not valid JSON"]),
+    ("train-hidden-zero", "train {d}/dataset --hidden 0,8 -o trained", REFUSED, ["hidden", "at least 1", "0,8"]),
+    ("train-sequence-past-the-recordings", "train {d}/dataset --sequence-length 100000 -o trained", REFUSED, ["sequence-length 100000", "383 samples", "at most 383"]),
+    ("train-epochs-zero", "train {d}/dataset --max-epochs 0 -o trained", REFUSED, ["max-epochs", "got 0"]),
+    ("train-batch-zero", "train {d}/dataset --batch-size 0 -o trained", REFUSED, ["batch-size", "got 0"]),
+    ("train-learning-rate-negative", "train {d}/dataset --learning-rate -1 -o trained", REFUSED, ["learning-rate", "(0, 1)", "-1"]),
+    ("train-target-unknown", "train {d}/dataset --targets fx,colour -o trained", REFUSED, ["--targets", "'colour'"]),
+    ("evaluate-dataset-of-another-sensor", "evaluate {d}/model {d}/dataset", REFUSED, ["dataset: channels b0, b1", "the model reads b00"]),
     # generate: every setting checked before any work, named by its option
     ("generate-events-zero", "generate --sensor pad5x5 --events 0 -o ds", REFUSED, ["--events", "got 0"]),
     ("generate-stage-with-tilt", "generate --sensor pad5x5 --regime stage --max-tilt 10 -o ds", REFUSED, ["--max-tilt", "--regime stage"]),
@@ -657,6 +696,12 @@ CASES = [
     ("generate-out-is-file", "generate --sensor pad5x5 -o {d}/afile", REFUSED, ["afile", "is a file, not a folder"]),
     ("generate-foreign-folder", "generate --sensor pad5x5 -o {d}", REFUSED, ["not part of a hydrotact dataset"]),
     ("generate-unknown-sensor", "generate --sensor pad6x6 -o ds", REFUSED, ["pad6x6"]),
+    ("generate-into-another-dataset", "generate --sensor pad5x5 --events 2 -o {d}/dataset", REFUSED, ["holds another dataset (sphere8, 2 events, seed 1)", "nothing written"]),
+    ("generate-into-another-run", "generate --sensor pad5x5 --events 2 -o {d}/ds_unfinished", REFUSED, ["ds_unfinished", "unfinished run of another dataset"]),
+    ("generate-ray-no-port", "generate --sensor pad5x5 --ray nohost -o ds", REFUSED, ["--ray nohost", "no Ray cluster answers"]),
+    ("generate-unknown-probe", "generate --sensor pad5x5 --probe cube:a=1 -o ds", REFUSED, ["--probe", "unknown probe 'cube:a=1'"]),
+    ("generate-negative-material", "generate --sensor pad5x5 --material {d}/material_negative.json -o ds", REFUSED, ["material_negative.json", "long_term_modulus_Pa.value"]),
+    ("generate-force-from-zero", "generate --sensor pad5x5 --force-range 0,1 -o ds", REFUSED, ["--force-range", "LOW > 0 N"]),
     # generate on a Ray cluster that is not there: refused at once (Ray's own init waited over 300 s), nothing written
     ("generate-dead-ray", "generate --sensor pad5x5 --events 2 --ray 127.0.0.1:9 -o ds", REFUSED, ["--ray 127.0.0.1:9", "no Ray cluster answers at 127.0.0.1:9"]),
     # design: impossible constraints refused before any work, no .partial left
@@ -664,6 +709,20 @@ CASES = [
     ("design-spacing-wider-than-the-pad", "design --sensor pad5x5 --spacing 0.05 -o lay.json", REFUSED, ["cannot place 25 barometers", "50 mm apart", "--spacing"]),
     ("design-other-count-no-start", "design --sensor pad5x5 --barometers 9 --restarts 0 -o lay.json", REFUSED, ["--restarts 0", "--barometers 9", "of 25 barometers"]),
     ("design-out-csv", "design --sensor pad5x5 -o lay.csv", REFUSED, ["lay.csv", "*.json"]),
+    ("design-no-barometers", "design --sensor pad5x5 --barometers 0 -o lay.json", REFUSED, ["--barometers", "at least 1, got 0"]),
+    ("design-one-too-many", "design --sensor pad5x5 --barometers 26 --restarts 0 -o lay.json", REFUSED, ["cannot place 26 barometers", "own layout holds 25"]),
+    ("design-unknown-probe", "design --sensor pad5x5 --probe cube:a=1 -o lay.json", REFUSED, ["--probe", "unknown probe 'cube:a=1'"]),
+    ("design-noise-negative", "design --sensor pad5x5 --noise -1 -o lay.json", REFUSED, ["--noise", "non-negative", "-1"]),
+    ("design-depth-range-backwards", "design --sensor pad5x5 --target depth --depth-range 0.002,0.001 -o lay.json", REFUSED, ["--depth-range", "LOW <= HIGH"]),
+    ("design-unknown-sensor", "design --sensor nosuch -o lay.json", REFUSED, ["nosuch", "neither a built-in sensor"]),
+    ("design-modulus-negative", "design --sensor pad5x5 --modulus -5 -o lay.json", REFUSED, ["--modulus", "positive", "-5"]),
+    ("design-material-tau-zero", "design --sensor pad5x5 --material {d}/material_tau0.json -o lay.json", REFUSED, ["material_tau0.json", "prony_terms[0].tau_s.value"]),
+    # compare, predict, export: inputs of the wrong kind
+    ("compare-model-for-a-fit", "compare {d}/model {d}/lumped.parquet -o cmp", REFUSED, ["model: no material.json", "hydrotact fit --lumped"]),
+    ("compare-tare-zero-seconds", "compare {d}/nowhere {d}/lumped.parquet -o cmp --tare first:0", REFUSED, ["--tare", "first:SECONDS", "'first:0'"]),
+    ("predict-elastic-log", "predict {d}/model {d}/elastic.parquet -o estimates.parquet", REFUSED, ["elastic.parquet", "absolute barometer readings"]),
+    ("predict-nan-weights", "predict {d}/model_nan {d}/baro.parquet -o estimates.parquet", REFUSED, ["model_nan/weights.npz", "not finite"]),
+    ("export-no-model", "export {d}/nowhere -o model.h", REFUSED, ["nowhere/model.json", "no such file"]),
     # demo
     ("demo-out-is-file", "demo -o {d}/afile", REFUSED, ["afile", "is a file, not a folder"]),
     ("demo-out-unwritable", "demo -o /proc/demo", REFUSED, ["/proc/demo", "cannot write"]),

@@ -106,6 +106,31 @@ def test_the_projection_makes_any_layout_feasible_and_an_impossible_count_is_ref
         design_layout(sphere8[0], config=DesignConfig(contacts=8, restarts=1, steps=1), compare={"hand-made": (positions, unit)})
 
 
+def test_a_dense_sensors_random_starts_come_from_its_own_layout():
+    """pad5x5's 25 ports at the default 2.5 mm spacing and 1 mm margin: random packing
+    jams at ~18 (it refused the default design of the built-in sensor), so the random
+    starts are the sensor's own layout with each port moved where the spacing allows:
+    feasible, each different, and one port more is still refused."""
+    from hydrotact.design import DesignConfig
+    from hydrotact.design._design import _own_layout
+
+    spec, config = load_sensor("pad5x5"), DesignConfig()
+    region = make_feasible_region(spec.make_mesh(check=False), "board", config.margin, config.spacing, config.max_tilt_deg)
+    rng = np.random.default_rng(0)
+    with pytest.raises(HydrotactError, match=r"cannot place 25 barometers .* random packing found room for \d+ at most;"):
+        region.random_layout(25, rng)
+    own = _own_layout(region, spec)
+    assert own is not None and own.shape == (25, 3)
+    starts = [region.random_layout(25, rng, own) for _ in range(3)]
+    for positions, axes in starts:
+        assert region.violations(positions, axes) == []
+        assert np.abs(positions - own).max() > config.spacing  # moved, not the own layout again
+    assert not np.allclose(starts[0][0], starts[1][0])
+    region.random_layout(9, rng, own)  # fewer fit by packing alone
+    with pytest.raises(HydrotactError, match=r"cannot place 26 barometers .* the sensor's own layout holds 25"):
+        region.random_layout(26, rng, own)
+
+
 @pytest.fixture(scope="module")
 def linearised(sphere8):
     spec, _ = sphere8

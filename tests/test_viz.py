@@ -81,6 +81,12 @@ def test_the_contact_colour_bar_starts_at_zero_and_the_camera_looks_from_minus_y
     render.render_mesh(mesh, "unused.png", title="pad")
     eye, centre, _ = (np.asarray(v) for v in caught[-1].camera_position)
     assert eye[1] < centre[1] and eye[2] < centre[2]  # from -y and below: the bonded base shows
+    # The axes frame the half drawn (y from the cut at 0 to 6.6 mm), on its outer
+    # edges: they stood on the whole pad's box before, 7.5 mm in front of the cut.
+    axes = caught[-1].renderer.cube_axes_actor
+    x0, x1, y0, y1, z0, z1 = axes.GetBounds()
+    assert (x0, x1, y0, y1, z0, z1) == pytest.approx((-7.5, 7.5, 0.0, 8.0, 0.0, 4.0))
+    assert axes.GetFlyMode() == axes.VTK_FLY_OUTER_EDGES
 
 
 def test_the_lumped_fit_plots_keep_the_curve_and_the_histogram_in_view(monkeypatch):
@@ -181,3 +187,66 @@ def test_the_error_map_keeps_its_axis_labels_inside_the_picture(monkeypatch, pan
             box = label.get_window_extent(renderer)
             assert label.get_text() and 0.0 <= box.x0 and box.x1 <= width, (label.get_text(), box)
     figure.clf()
+
+
+def test_the_fit_traces_mark_the_readings_the_fit_masked(monkeypatch):
+    """traces.png: readings at the part's range (weight 0: left out of the fit) break
+    the measured line and are drawn as crosses, counted in the title; the fitted curve
+    goes on through them (it drew the clipped plateau as if measured before)."""
+    from types import SimpleNamespace
+
+    import hydrotact.sysid as sysid
+    import hydrotact.viz._fit as fit_plots
+
+    figures = []
+    monkeypatch.setattr(fit_plots, "save_figure", lambda figure, path: figures.append(figure))
+    monkeypatch.setattr(sysid, "calc_relaxation_band", lambda result, times: (np.ones_like(times), np.ones_like(times), np.ones_like(times)))
+    times = np.arange(300) / 100.0
+    truth = 101325.0 + 40e3 * np.exp(-(((times - 1.5) / 0.4) ** 2))
+    observed = np.column_stack([np.minimum(truth, 125000.0), 101325.0 + 0.01 * truth])
+    weights = np.ones_like(observed)
+    weights[observed[:, 0] >= 125000.0, 0] = 0.0
+    log = SimpleNamespace(observed=observed, times=times, weights=weights, num_channels=2)
+    info = SimpleNamespace(source="clipped.parquet", channels=["b22", "b23"], force_columns=[])
+    result = SimpleNamespace(problem=SimpleNamespace(logs=[log], infos=[info]), predictions=lambda: [np.column_stack([truth, observed[:, 1]])],
+                             reduced_chi_square=1.0, terms=[], layout=SimpleNamespace(num_terms=0))
+    fit_plots.plot_fit(result, "unused")
+    axis = figures[0].axes[0]
+    masked = int((weights[:, 0] == 0).sum())
+    assert masked > 0 and f"{masked} readings masked" in axis.get_title()
+    measured = axis.get_lines()[0].get_ydata()
+    assert np.isnan(measured[weights[:, 0] == 0]).all() and np.isfinite(measured[weights[:, 0] > 0]).all()
+    crosses = [line for line in axis.get_lines() if line.get_marker() == "x"]
+    assert len(crosses) == 1 and len(crosses[0].get_xdata()) == masked
+    assert "masked: not fitted" in [text.get_text() for text in axis.get_legend().get_texts()]
+
+
+@pytest.mark.parametrize("covariance", [True, False])
+def test_compare_traces_draw_the_prediction_band(monkeypatch, covariance):
+    """compare_traces.png: the held-out prediction with its band (model ± 2σ of the
+    fit's covariance), where compare's line reports a band it did not draw before; no
+    band where the fit had no covariance (NaN)."""
+    from types import SimpleNamespace
+
+    from matplotlib.collections import PolyCollection
+
+    import hydrotact.viz._press as press
+
+    figures = []
+    monkeypatch.setattr(press, "save_figure", lambda figure, path: figures.append(figure))
+    times = np.arange(400) / 50.0
+    hold = np.where((times > 2) & (times < 5), 0, -1)
+    predicted = 300.0 * (hold >= 0)[:, None] * np.ones((1, 2))
+    std = np.full_like(predicted, 25.0 if covariance else np.nan)
+    comparison = SimpleNamespace(channels=["a", "b"], hold=hold, times=times, mask=np.ones_like(predicted, dtype=bool), predicted=predicted,
+                                 observed=predicted + 10.0, predicted_std=std, noise_pa=np.array([2.0, 2.0]))
+    press.plot_comparisons([comparison], "unused")
+    axis = figures[0].axes[0]
+    fills = [item for item in axis.collections if isinstance(item, PolyCollection)]
+    labels = [text.get_text() for text in axis.get_legend().get_texts()]
+    if covariance:
+        assert fills and "model ± 2σ (prediction band)" in labels
+        top = max(path.vertices[:, 1].max() for fill in fills for path in fill.get_paths())
+        assert top == pytest.approx(300.0 + 50.0)  # 2σ above the prediction, baseline off
+    else:
+        assert not fills and not any("band" in label for label in labels)

@@ -96,9 +96,10 @@ def design_layout(
     placement = config.placement or (Placement.BOARD if np.allclose(spec.taxel_positions_S[:, 2], np.min(mesh.vertices[:, 2]), atol=1e-9) else Placement.INSIDE)
     region = make_feasible_region(mesh, placement, config.margin, config.spacing, config.max_tilt_deg, config.max_height)
     rng = np.random.default_rng(config.seed)
-    starts = [region.random_layout(count, rng) for _ in range(config.restarts)]  # refuses an impossible count first
+    known = _own_layout(region, spec)  # feasible: a certificate that as many ports fit
+    starts = [region.random_layout(count, rng, known) for _ in range(config.restarts)]  # refuses an impossible count first
     if not starts:  # no random start asked for: an impossible count, spacing or margin is still refused before any work
-        region.random_layout(count, np.random.default_rng(config.seed))
+        region.random_layout(count, np.random.default_rng(config.seed), known)
         if count != spec.num_taxels:
             raise HydrotactError(
                 f"--restarts 0 with --barometers {count}: the only start without random ones is the sensor's own layout, of {spec.num_taxels} barometers; "
@@ -154,7 +155,7 @@ def design_layout(
     builtin = None
     if count == spec.num_taxels:
         builtin, capacity = score(spec.taxel_positions_S, spec.taxel_axes_S, sizes, capacity)
-        own = region.project_positions(spec.taxel_positions_S), region.project_axes(spec.taxel_axes_S)
+        own = (known if known is not None else region.project_positions(spec.taxel_positions_S)), region.project_axes(spec.taxel_axes_S)
         named.insert(0, ("sensor's own", *own))
     random_scores = []
     for _, positions, axes in named[1 if builtin is not None else 0 :]:
@@ -233,6 +234,16 @@ def make_noise_model(part, config: "DesignConfig | None" = None) -> NoiseModel:
         relative_noise=jnp.asarray(float(config.relative_noise)),
         limit=jnp.asarray(float(part.range_pa[1] - part.ambient_pa)),
     )
+
+
+def _own_layout(region, spec) -> "np.ndarray | None":
+    """The sensor's own ports moved onto the design's feasible set, or None where
+    they cannot all be placed there (the constraints then decide alone)."""
+    try:
+        positions = region.project_positions(spec.taxel_positions_S)
+    except HydrotactError:
+        return None
+    return None if region.violations(positions, np.tile([0.0, 0.0, 1.0], (len(positions), 1))) else positions
 
 
 def _start_checkpoint(folder, request: dict):

@@ -240,10 +240,14 @@ class FeasibleRegion:
         sin_tilt = np.sqrt(np.clip(1.0 - cos_tilt**2, 0.0, None))
         return np.column_stack([sin_tilt * np.cos(azimuth), sin_tilt * np.sin(azimuth), cos_tilt])
 
-    def random_layout(self, count: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    def random_layout(self, count: int, rng: np.random.Generator, known=None) -> tuple[np.ndarray, np.ndarray]:
         """A feasible layout of `count` ports by random sequential packing of uniform
-        candidates, with random axes; a HydrotactError naming the most that fit when
-        `count` ports `spacing` apart cannot be packed."""
+        candidates, with random axes. Random packing jams at about half the density a
+        grid reaches (a 5 x 5 grid of ports at their pitch: packing finds room for ~18),
+        so where it falls short and `known` (a feasible layout of at least `count`
+        ports, e.g. the sensor's own, projected) is given, the start is `count` of
+        those ports, each moved in turn to a random candidate wherever the spacing
+        allows. A HydrotactError naming the most that fit when neither gives `count`."""
         most = 0
         for _ in range(PACKING_TRIES):
             points = self.candidates(CANDIDATES, rng)
@@ -254,13 +258,32 @@ class FeasibleRegion:
                     if len(chosen) == count:
                         return np.array(chosen), self.random_axes(count, rng)
             most = max(most, len(chosen))
+        if known is not None and len(known) >= count:
+            return self._shuffled(np.asarray(known, dtype=np.float64), count, rng), self.random_axes(count, rng)
+        found = f"random packing found room for {most} at most" + (f", the sensor's own layout holds {len(known)}" if known is not None else "")
         where = "on the board" if self.placement == Placement.BOARD else "inside the elastomer"
         if self.max_height is not None and self.placement != Placement.BOARD:
             where += f" no higher than {self.max_height * 1e3:.4g} mm above the board"
         raise HydrotactError(
             f"cannot place {count} barometers {self.spacing * 1e3:.3g} mm apart {where} at least {self.margin * 1e3:.3g} mm from its boundary: "
-            f"random packing found room for {most} at most; ask for fewer barometers (--barometers), a smaller spacing (--spacing) or a smaller margin (--margin)"
+            f"{found}; ask for fewer barometers (--barometers), a smaller spacing (--spacing) or a smaller margin (--margin)"
         )
+
+
+    def _shuffled(self, known: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
+        """`count` ports of a feasible layout, each (in random order, twice over)
+        moved to the first of a few random candidates that keeps the spacing: a random
+        feasible layout near a dense one."""
+        positions = known[rng.permutation(len(known))[:count]].copy()
+        limit = self.spacing * (1.0 + SLACK)
+        for _ in range(2):
+            for i in rng.permutation(count):
+                others = np.delete(positions, i, axis=0)
+                for point in self.candidates(64, rng):
+                    if len(others) == 0 or np.min(np.linalg.norm(others - point, axis=1)) >= limit:
+                        positions[i] = point
+                        break
+        return positions
 
 
 def make_feasible_region(mesh, placement, margin: float, spacing: float, max_tilt_deg: float, max_height: float | None = None) -> FeasibleRegion:

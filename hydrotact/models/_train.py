@@ -91,6 +91,8 @@ class TrainConfig:
                 raise HydrotactError(f"{name.replace('_', '-')}: must be at least 1, got {getattr(self, name)}")
         if self.burn_in < 0:
             raise HydrotactError(f"burn-in: must not be negative, got {self.burn_in}")
+        if self.hidden is not None and (not len(self.hidden) or any(isinstance(size, bool) or not isinstance(size, int | np.integer) or size < 1 for size in self.hidden)):
+            raise HydrotactError(f"hidden: sizes must be whole numbers of at least 1, got {','.join(map(str, self.hidden)) or 'none'}")
         if not (0.0 < self.learning_rate < 1.0):
             raise HydrotactError(f"learning-rate: must lie in (0, 1), got {self.learning_rate:g}")
         if self.asinh_scale is not None and (isinstance(self.asinh_scale, bool) or not isinstance(self.asinh_scale, int | float) or not (np.isfinite(self.asinh_scale) and self.asinh_scale > 0.0)):
@@ -251,6 +253,12 @@ def _digest_arrays(arrays: list) -> str:
 def _fit(spec, params, normaliser, channels, train, held_out, config, folder, progress, on_epoch, request) -> TrainedEstimator:
     from tqdm.auto import tqdm
 
+    longest = int(np.max(np.diff([*np.asarray(train["block_starts"]), len(train["time"])])))
+    if config.sequence_length > longest:
+        raise HydrotactError(
+            f"sequence-length {config.sequence_length}: longer than the longest training recording ({longest} samples), so every sequence would be "
+            f"mostly padding; use at most {longest}"
+        )
     inputs, targets = make_sequences(train, channels, normaliser, config.sequence_length, config.burn_in, targets=spec.targets)
     valid_inputs, valid_targets = make_sequences(held_out, channels, normaliser, config.sequence_length, config.burn_in, targets=spec.targets)
     if not len(inputs) or not len(valid_inputs):

@@ -30,14 +30,24 @@ def plot_fit(result, out_dir) -> dict:
     for axis, log, info, prediction in zip(axes[:, 0], logs, infos, predictions):
         observed = np.asarray(log.observed)
         times = np.asarray(log.times)
+        masked = np.asarray(log.weights) <= 0.0  # readings the fit left out (clipped at the part's range)
         count = log.num_channels
         spread = observed[:, :count].max(axis=0) - observed[:, :count].min(axis=0)
+        marked = False
         for c in np.argsort(spread)[::-1][:_MAX_PLOTTED_CHANNELS]:
             base = observed[0, c]
-            line = axis.plot(times, (observed[:, c] - base) / 1e3, lw=0.8, alpha=0.6)[0]
+            shown = np.where(masked[:, c], np.nan, observed[:, c])  # a masked stretch breaks the measured line
+            line = axis.plot(times, (shown - base) / 1e3, lw=0.8, alpha=0.6)[0]
             axis.plot(times, (prediction[:, c] - base) / 1e3, "--", lw=1.0, color=line.get_color(), label=info.channels[c])
+            if masked[:, c].any():
+                label = None if marked else "masked: not fitted"
+                axis.plot(times[masked[:, c]], (observed[masked[:, c], c] - base) / 1e3, "x", ms=3, mew=0.6, color=line.get_color(), alpha=0.8, label=label)
+                marked = True
         axis.set_ylabel("reading − first sample [kPa]")
-        axis.set_title(f"{info.source}: measured (solid) and fitted (dashed)", fontsize=9)
+        title = f"{info.source}: measured (solid) and fitted (dashed)"
+        if marked:
+            title += f"; {int(masked[:, :count].sum())} readings masked (x: at the part's range, left out of the fit)"
+        axis.set_title(title, fontsize=9)
         axis.legend(ncol=4, fontsize=7)
     axes[-1, 0].set_xlabel("time [s]")
     figure.tight_layout()

@@ -26,15 +26,22 @@ def _colour(c: int) -> str:
 
 def _press_panels(channels, series, path, title, ylabel="elastic part [Pa]") -> None:
     """One panel per channel: for each (channel, press) series (t, observed,
-    predicted), observed as dots and predicted as a line."""
+    predicted[, band]), observed as dots and predicted as a line; a band (the
+    prediction's 1σ from the fit's covariance) is drawn as the model ± 2σ."""
     shown = list(channels)[:MAX_CHANNEL_PANELS]
     figure, axes = new_figure(len(shown), 1, figsize=(9, 2.4 * len(shown) + 0.6), squeeze=False, sharex=True)
     for c, (axis, name) in enumerate(zip(axes[:, 0], shown)):
-        for times, observed, predicted in series[c]:
+        banded = False
+        for times, observed, predicted, *band in series[c]:
             axis.plot(times, observed, ".", ms=1.5, color=_colour(c), alpha=0.35)
             axis.plot(times, predicted, "-", lw=0.7, color="k", alpha=0.6)
+            if band and np.isfinite(band[0]).any():
+                axis.fill_between(times, predicted - 2.0 * band[0], predicted + 2.0 * band[0], color="k", alpha=0.15, lw=0)
+                banded = True
         axis.plot([], [], ".", color=_colour(c), label=f"{name} measured")
         axis.plot([], [], "-", color="k", label="model")
+        if banded:
+            axis.fill_between([], [], [], color="k", alpha=0.15, lw=0, label="model ± 2σ (prediction band)")
         axis.set_ylabel(ylabel, fontsize=8)
         axis.legend(loc="upper right", fontsize=7)
     axes[0, 0].set_title(title, fontsize=9)
@@ -173,8 +180,9 @@ def plot_comparisons(comparisons, out_dir) -> dict:
             for c in range(len(channels)):
                 used = comparison.mask[rows, c]
                 base = comparison.predicted[rows[0], c]
-                series[c].append((t[used], comparison.observed[rows, c][used] - base, comparison.predicted[rows, c][used] - base))
-                band = np.nan_to_num(comparison.predicted_std[rows, c])  # NaN: a fit without its covariance
+                band = comparison.predicted_std[rows, c]  # NaN: a fit without its covariance (not drawn)
+                series[c].append((t[used], comparison.observed[rows, c][used] - base, comparison.predicted[rows, c][used] - base, band[used]))
+                band = np.nan_to_num(band)
                 scale = np.sqrt(comparison.noise_pa[c] ** 2 + band**2)
                 residuals[c].append((t[used], ((comparison.observed - comparison.predicted)[rows, c] / scale)[used]))
     _press_panels(channels, series, paths["traces_png"], f"{len(comparisons)} held-out log(s): measured and predicted", ylabel="reading − baseline [Pa]")

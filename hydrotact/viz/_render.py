@@ -53,7 +53,7 @@ def _show_axes(plotter: pv.Plotter, bounds_mm) -> None:
         bounds += [first + 0.0, last + 0.0]
         counts[f"n_{axis}labels"] = int(round((last - first) / step)) + 1
         decimals = max(decimals, next(k for k in range(4) if abs(step * 10**k - round(step * 10**k)) < 1e-9 or k == 3))
-    plotter.show_bounds(bounds=bounds, xtitle="x [mm]", ytitle="y [mm]", ztitle="z [mm]", font_size=16, fmt=f"%.{decimals}f", **counts)
+    plotter.show_bounds(bounds=bounds, xtitle="x [mm]", ytitle="y [mm]", ztitle="z [mm]", font_size=16, fmt=f"%.{decimals}f", location="outer", **counts)
 
 
 def _save(plotter: pv.Plotter, path) -> None:
@@ -69,15 +69,18 @@ def render_mesh(mesh: TetMesh, path, title: str = "") -> None:
     grid = to_pyvista(mesh, scale=1e3)
     centre = np.asarray(grid.center)
     plotter = pv.Plotter(off_screen=True, window_size=_WINDOW)
-    plotter.add_mesh(grid.clip(normal="y", origin=centre, crinkle=True, invert=False), color="lightgrey", show_edges=True, edge_color="dimgrey")
+    kept = grid.clip(normal="y", origin=centre, crinkle=True, invert=False)
+    plotter.add_mesh(kept, color="lightgrey", show_edges=True, edge_color="dimgrey")
     core = _faces_polydata(mesh, CORE)
     if core.n_cells:
         plotter.add_mesh(core.clip(normal="y", origin=centre, invert=False), color="orange")
         plotter.add_mesh(_faces_polydata(mesh, FREE).clip(normal="y", origin=centre, invert=False).extract_feature_edges(), color="black")
         title = f"{title}\ncore (bonded) faces in orange" if title else "core (bonded) faces in orange"
     plotter.add_text(title, font_size=12)
-    _show_axes(plotter, grid.bounds)
-    _view_from(plotter, grid.bounds, elevation=-0.6)  # from below: the bonded base shows
+    shown = np.array(kept.bounds)
+    shown[2] = max(shown[2], centre[1])  # whole tets cross the cut: the axes start at it
+    _show_axes(plotter, shown)  # the axes frame the half shown, not the whole mesh in front of it
+    _view_from(plotter, shown, elevation=-0.6)  # from below: the bonded base shows
     _save(plotter, path)
 
 
@@ -98,8 +101,8 @@ def render_field(mesh: TetMesh, values, path, *, label: str, title: str = "") ->
     )
     plotter.add_mesh(grid.extract_feature_edges(), color="black", line_width=1)
     plotter.add_text(title, font_size=12)
-    _show_axes(plotter, grid.bounds)
-    _view_from(plotter, grid.bounds)  # the kept half is y > centre: its cut faces the camera
+    _show_axes(plotter, clipped.bounds)
+    _view_from(plotter, clipped.bounds)  # the kept half is y > centre: its cut faces the camera
     _save(plotter, path)
 
 
