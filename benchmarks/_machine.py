@@ -40,7 +40,7 @@ def write_results(name: str, machine: dict, rows: list) -> Path:
 
 
 def time_over_poses(per_pose, translations, chunk: int, repeats: int):
-    """Time `per_pose(translation)` over a batch of translations (count, 3) in one
+    """Time `per_pose(row)` over a batch of rows (count, 3 or more) in one
     jitted call: vmap over chunks of `chunk` poses, lax.map over the chunks (the last
     chunk padded with repeats of the last pose). Compiles and runs once first.
 
@@ -57,10 +57,11 @@ def time_over_poses(per_pose, translations, chunk: int, repeats: int):
     chunk = min(chunk, count)
     padded = int(np.ceil(count / chunk)) * chunk
     batch = jnp.asarray(np.concatenate([translations, np.repeat(translations[-1:], padded - count, axis=0)]))
+    width = batch.shape[1]  # 3 (a translation) or more (a translation and a rotation vector)
 
     @jax.jit
     def run(batch):
-        return jax.lax.map(jax.vmap(per_pose), batch.reshape(-1, chunk, 3))
+        return jax.lax.map(jax.vmap(per_pose), batch.reshape(-1, chunk, width))
 
     result = jax.block_until_ready(run(batch))
     timings = []

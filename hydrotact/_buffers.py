@@ -26,6 +26,7 @@ from collections.abc import Callable
 from typing import Any, ClassVar, Self, TypeVar
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -39,8 +40,10 @@ SHRINK_BELOW = 4
 size that would hold what it needed (a margin against growing back at once)."""
 
 # Masks at least this long are compacted by a binary search over their running count,
-# shorter ones by a blocked prefix sum and one scatter (see compact_indices).
+# shorter ones by a blocked prefix sum and one scatter (see compact_indices), unless
+# they are at least WORDS_FROM times the buffer's size: then by 32-bit words.
 SEARCH_FROM = 1 << 17
+WORDS_FROM = 8
 
 _Capacity = TypeVar("_Capacity", bound="AbstractCapacity")
 
@@ -183,11 +186,43 @@ def _blocked_cumsum(flags, block: int = 128):
     return (within + (jnp.cumsum(totals) - totals)[:, None]).reshape(-1)[:n]
 
 
+def _compact_words(flags, size: int):
+    """compact_indices of a 1-D bool mask through 32-bit words: the mask packed 32
+    entries a word, the words' set bits counted (`population_count`) and summed, then
+    for each output slot a binary search over the W = n/32 words' running count and one
+    over the bits of its word (5 halvings by masked counts). O(n + size log W); the
+    running count and the searches run over n/32 entries, not n."""
+    n = flags.shape[0]
+    num_words = -(-n // 32)
+    packed = jnp.concatenate([flags, jnp.zeros(num_words * 32 - n, flags.dtype)]).reshape(num_words, 32)
+    weights = jnp.uint32(1) << jnp.arange(32, dtype=jnp.uint32)
+    words = jnp.sum(jnp.where(packed, weights, jnp.uint32(0)), axis=1, dtype=jnp.uint32)
+    counts = jax.lax.population_count(words).astype(jnp.int32)
+    ends = jnp.cumsum(counts)
+    slots = jnp.arange(size, dtype=jnp.int32)
+    word = jnp.minimum(jnp.searchsorted(ends, slots, side="right", method="scan_unrolled"), num_words - 1).astype(jnp.int32)
+    rank = slots - (ends[word] - counts[word])  # the slot's entry is the rank-th set bit of its word (from 0)
+    bits = words[word]
+    position = jnp.zeros(size, jnp.uint32)
+    for step in (16, 8, 4, 2, 1):  # the largest position with at most `rank` set bits below it
+        trial = position + jnp.uint32(step)
+        below = bits & ((jnp.uint32(1) << trial) - jnp.uint32(1))
+        position = jnp.where(jax.lax.population_count(below).astype(jnp.int32) <= rank, trial, position)
+    filled = slots < ends[-1]
+    return jnp.where(filled, word * 32 + position.astype(jnp.int32), -1), filled, ends[-1]
+
+
 def compact_indices(mask, size: int):
     """Indices of the True entries of a mask, in order, padded with -1 to `size`:
     `jnp.nonzero(mask.ravel(), size=size, fill_value=-1)`, with the overflow counted.
 
-    Two exact methods, chosen by the mask's length (static): below `SEARCH_FROM`
+    Three exact methods, chosen by the mask's length and `size` (static). A mask at
+    least WORDS_FROM times `size` is packed into 32-bit words (:func:`_compact_words`):
+    measured on the CPU, vmapped over 16 masks, 1.6-4.7x faster than the two methods
+    below for masks of 5e3 to 1e6 entries (450k entries into 2,304 slots, the dense box
+    test of the generator's sphere on sphere8: 1.94 -> 0.55 ms), and 3.7x slower for
+    5e3 entries into 4,096 slots (the search then costs more than the pass). Otherwise,
+    by the mask's length: below `SEARCH_FROM`
     entries, a blocked prefix sum gives each True entry its slot and one scatter
     writes the indices (entries past `size` are dropped, and counted); from it on, a
     running count and a binary search for each output slot (O(n + size log n), no
@@ -204,6 +239,8 @@ def compact_indices(mask, size: int):
     bool, the slot holds an index; count, int32 scalar: the number of True entries,
     which exceeds `size` when the buffer overflows).
     """
+    if mask.size >= WORDS_FROM * size:
+        return _compact_words(mask.reshape(-1).astype(bool), size)
     flags = mask.reshape(-1).astype(jnp.int32)
     if flags.shape[0] >= SEARCH_FROM:
         counts = jnp.cumsum(flags)

@@ -93,6 +93,24 @@ def test_compaction_matches_flatnonzero(length, density, rng):
         np.testing.assert_array_equal(np.asarray(valid), np.arange(size) < kept)
 
 
+@pytest.mark.parametrize(("length", "size"), [(1000, 50), (4096, 128), (1000, 600), (_buffers.SEARCH_FROM + 11, 4096)])
+def test_each_compaction_method_vmapped_matches_flatnonzero(length, size, rng):
+    """The 32-bit-word method (a mask at least WORDS_FROM times the buffer: the first
+    two rows, one of a length that is no multiple of 32), the scatter and the search,
+    vmapped as the kernels call them; the set bits at a word's top (bit 31) and a
+    whole word set included."""
+    masks = rng.random((6, length)) < np.array([0.0, 0.002, 0.02, 0.2, 0.9, 1.0])[:, None]
+    masks[2, 31::32] = True
+    index, valid, count = jax.jit(jax.vmap(lambda m: compact_indices(m, size)))(jnp.asarray(masks))
+    for row, mask in enumerate(masks):
+        expected = np.flatnonzero(mask)
+        kept = min(size, len(expected))
+        assert int(count[row]) == len(expected)
+        np.testing.assert_array_equal(np.asarray(index[row])[:kept], expected[:kept])
+        np.testing.assert_array_equal(np.asarray(index[row])[kept:], -1)
+        np.testing.assert_array_equal(np.asarray(valid[row]), np.arange(size) < kept)
+
+
 def test_compaction_flattens_a_2d_mask(rng):
     mask = rng.random((25, 40)) < 0.2
     index, _, count = compact_indices(jnp.asarray(mask), 400)
