@@ -269,7 +269,6 @@ class FeasibleRegion:
             f"{found}; ask for fewer barometers (--barometers), a smaller spacing (--spacing) or a smaller margin (--margin)"
         )
 
-
     def _shuffled(self, known: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
         """`count` ports of a feasible layout, each (in random order, twice over)
         moved to the first of a few random candidates that keeps the spacing: a random
