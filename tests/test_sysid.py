@@ -476,3 +476,35 @@ def test_write_fit_outputs_full(result_3, tmp_path):
     assert report["mode"] == "full" and report["converged"]
     assert report["solver"] == material["provenance"]["solver"] == "lm"  # the name, as before solvers were objects
 
+
+
+def test_a_parameter_without_a_finite_standard_error_is_written_without_one(small_lm, capsys):
+    """A fit whose covariance has a direction the logs do not constrain (NaN or inf:
+    a term driven to nothing, 0 x inf) wrote nothing before and ended with
+    "prony_terms[0].modulus_Pa.std: must be a finite number, got nan" (issue 49): the
+    material now leaves that std and the covariance out, and the report says the term
+    is not identified, with null, not NaN, in its JSON."""
+    import dataclasses
+    import json
+
+    from hydrotact.sysid import make_report
+    from hydrotact.sysid._report import make_fit_material
+
+    k = small_lm.names.index("log_modulus_1")
+    covariance = small_lm.covariance.copy()
+    covariance[k, :] = covariance[:, k] = np.nan
+    broken = dataclasses.replace(small_lm, covariance=covariance)
+    material = make_fit_material(broken)  # schema-checked inside
+    assert "covariance" not in material
+    stds = [("std" in term["modulus_Pa"], "std" in term["tau_s"]) for term in material["prony_terms"]]
+    assert stds.count((False, True)) == 1 and stds.count((True, True)) == len(stds) - 1
+    report = json.loads(json.dumps(make_report(broken), allow_nan=False))
+    moduli = [term["modulus_Pa"] for term in report["prony_terms"]]
+    unconstrained = [m for m in moduli if m["std"] is None]
+    assert len(unconstrained) == 1 and not unconstrained[0]["identified"] and "no finite standard error" in unconstrained[0]["note"]
+    assert "std" in material["long_term_modulus_Pa"]
+    from hydrotact.cli.fit import print_fit_table
+
+    print_fit_table(report)  # the command line's table: no format of a missing error
+    printed = capsys.readouterr().out
+    assert "NOT IDENTIFIED" in printed and "no finite error" in printed  # E1, and E0 whose error sums E1's

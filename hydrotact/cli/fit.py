@@ -136,7 +136,9 @@ def print_fit_table(report: dict, truth: dict | None = None) -> None:
         cells = [name]
         if truth is not None:
             cells.append("" if true is None else f"{true:.6g}{unit}")
-        if estimate.get("identified", True):
+        if estimate.get("identified", True) and std is None:  # no finite standard error (report.json says null)
+            cells += [f"{value:.6g}{unit}", "no finite error", ""]
+        elif estimate.get("identified", True):
             cells += [f"{value:.6g}{unit}", f"{std:.3g}{unit}", f"{std / abs(value):.2%}" if value else ""]
         else:  # the solver's last word, not a measurement: no error bar that looks like one
             cells += [f"({value:.3g}{unit})", "NOT IDENTIFIED", ""]
@@ -156,7 +158,7 @@ def print_fit_table(report: dict, truth: dict | None = None) -> None:
     for name, estimate in report.get("rig", {}).items():
         if estimate["fitted"]:
             unit = " s" if name == "lag_s" else "" if name.startswith("slope_x") else " mm"
-            scaled = estimate if unit != " mm" else {**estimate, "value": 1e3 * estimate["value"], "std": 1e3 * estimate["std"]}
+            scaled = estimate if unit != " mm" else {**estimate, "value": 1e3 * estimate["value"], "std": None if estimate["std"] is None else 1e3 * estimate["std"]}
             row(f"rig {name.removesuffix('_s')}", scaled, truth and truth.get("rig", {}).get(name), unit)
     Console().print(table)
     for note, names in notes.items():
@@ -175,7 +177,7 @@ def print_press_table(report: dict) -> None:
 
     def row(name, entry, unit=""):
         note = "" if entry["identified"] else f"NOT IDENTIFIED: {entry.get('note', '')}"
-        table.add_row(name, f"{entry['value']:.6g}{unit}", f"{entry['std']:.3g}{unit}", note)
+        table.add_row(name, f"{entry['value']:.6g}{unit}", "no finite error" if entry["std"] is None else f"{entry['std']:.3g}{unit}", note)
 
     for k, term in enumerate(report["prony_terms"]):
         row(f"E{k + 1}/E∞", term["ratio"])

@@ -30,8 +30,8 @@ def _quantity(value, std=None) -> dict:
 
 def _as_quantity(entry) -> dict:
     """A number, a (value, std) pair or a {value, std} dict as a quantity dict."""
-    if isinstance(entry, dict):
-        return {key: float(value) for key, value in entry.items()}
+    if isinstance(entry, dict):  # a std of None: none known
+        return {key: float(value) for key, value in entry.items() if value is not None}
     if isinstance(entry, tuple | list):
         return _quantity(*entry)
     return _quantity(entry)

@@ -55,7 +55,9 @@ class Estimate:
     std: float
 
     def to_json(self) -> dict:
-        return {"value": float(self.value), "std": float(self.std)}
+        """{value, std}; std null where the fit gives no finite standard error (a
+        direction the data do not constrain: JSON has no NaN)."""
+        return {"value": float(self.value), "std": float(self.std) if np.isfinite(self.std) else None}
 
 
 CHI_SQUARE_WARNING = 4.0
@@ -74,9 +76,18 @@ def identify_time(value: float, std: float, step: float, span: float) -> tuple[b
     is below it; and, if not, why."""
     if not step / 10 <= value <= 10 * span:
         return False, f"outside [{step / 10:.3g} s, {10 * span:.3g} s] (sampling step / 10, 10 x the longest log)"
+    if not np.isfinite(std):
+        return False, "no finite standard error: the logs do not constrain it"
     if not std < value:
         return False, "standard error larger than the value"
     return True, ""
+
+
+def identify_modulus(value: float, std: float) -> tuple[bool, str]:
+    """Whether a fitted modulus is measured: a finite standard error below it."""
+    if not np.isfinite(std):
+        return False, "no finite standard error: the logs do not constrain it"
+    return (True, "") if std < value else (False, "standard error larger than the value")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -156,7 +167,7 @@ class FitResult:
                 small = (False, f"under {MIN_TERM_FRACTION:.0e} of E(0): the term moves no reading")
                 result.append((small, small))
                 continue
-            modulus_ok = (True, "") if modulus.std < modulus.value else (False, "standard error larger than the value")
+            modulus_ok = identify_modulus(modulus.value, modulus.std)
             if not time_ok[0]:
                 modulus_ok = (False, f"its τ is not identified ({time_ok[1]})")
             result.append((modulus_ok, time_ok))

@@ -28,6 +28,10 @@ def _material_order(result: FitResult) -> list[int]:
     return [names.index("log_long_term_modulus")] + [names.index(f"log_modulus_{k + 1}") for k in order] + [names.index(f"log_tau_{k + 1}") for k in order]
 
 
+def _finite(std):
+    return float(std) if np.isfinite(std) else None
+
+
 def make_fit_material(result: FitResult, paths=(), name: str | None = None) -> dict:
     """The material document of a fit (schema-checked)."""
     terms = result.terms
@@ -63,8 +67,10 @@ def make_fit_material(result: FitResult, paths=(), name: str | None = None) -> d
         result.long_term_modulus.value,
         [m.value for m, _ in terms],
         [t.value for _, t in terms],
-        stds={"long_term_modulus": result.long_term_modulus.std, "moduli": [m.std for m, _ in terms], "taus": [t.std for _, t in terms]},
-        covariance={"parameters": parameters, "space": "log", "matrix": covariance.tolist()},
+        stds={"long_term_modulus": _finite(result.long_term_modulus.std), "moduli": [_finite(m.std) for m, _ in terms], "taus": [_finite(t.std) for _, t in terms]},
+        # A covariance with entries that are not finite (a direction the logs do not
+        # constrain) is left out, with those standard errors: the report says which.
+        covariance={"parameters": parameters, "space": "log", "matrix": covariance.tolist()} if np.all(np.isfinite(covariance)) else None,
         channels=channels or None,
         provenance=provenance,
         name=name,
