@@ -90,7 +90,15 @@ def calc_polygon_integrals(vertices, count, pressures, normal):
 # Column layout: many polygons at once, the polygon index last, so that every step is
 # an elementwise operation over long contiguous rows (what XLA's CPU backend
 # vectorises well). vertices (3, n, P), pressures (n, P), counts (P,). The results
-# are the same as the one-polygon functions above, vertex for vertex.
+# are the same as the one-polygon functions above, vertex for vertex (but for a polygon
+# lying in a clipping plane: see _clip_stage_columns).
+
+
+def _pick_columns(values, index):
+    """values (n, ..., P) at a per-polygon row index (P,): a one-hot sum over the n rows."""
+    n = values.shape[0]
+    onehot = (jnp.arange(n)[:, None] == index[None]).reshape(n, *(1,) * (values.ndim - 2), -1)
+    return jnp.sum(jnp.where(onehot, values, 0.0), axis=0)
 
 
 def _clip_stage_columns(vertices, count, normal, offset):
@@ -99,13 +107,22 @@ def _clip_stage_columns(vertices, count, normal, offset):
     half-space normal . x <= offset (normal (3, P), offset (P,)); -> vertices
     (n + 1, 3, P), count (P,).
 
-    Each vertex emits its own point (when inside) and its edge's crossing (when the
-    edge crosses), at slots given by a running count; output slot s then takes the one
-    candidate whose slot is s, by a one-hot sum over the 2n candidates (exact: one
-    term at most is not zero). Written as arrays, a stage is a few dozen operations
-    whatever n; the chain of n (n + 1) selects it replaced made three quarters of the
-    soft-rigid kernel's program and half its compile time (benchmarks/RESULTS.md,
-    issue 48).
+    A plane cuts a convex polygon in one run of outside vertices: the run around the
+    farthest vertex, from e + 1 to b - 1 cyclically (e the last inside vertex before
+    it, b the first after). Sutherland-Hodgman's output, in the order it emits it, is
+    then either v_0..v_e, the exit crossing (of edge e, e + 1), the entry crossing (of
+    edge b - 1, b), v_b..v_last (the run does not pass vertex 0, or ends at the last
+    vertex), or the entry crossing, v_b..v_e, the exit crossing (it passes vertex 0).
+    Each output slot takes its vertex unshifted, one of the two crossings, or the
+    vertex a per-polygon shift further on, shifted in log2(n) steps: a few selects
+    per slot, where emitting every candidate at a running count and picking each
+    slot's by a one-hot sum over 2n candidates cost (n + 1) 2n (3.6x slower, issue
+    48). The output is that of :func:`clip_polygon` vertex for vertex whenever the
+    inside vertices are one run; where round-off splits them (vertices within
+    round-off of the plane, on either side), the other runs count as inside: they
+    differ from the plane by round-off. A polygon lying in the plane (every distance
+    round-off) is the one case where this matters, and the soft-rigid kernel's tie
+    rule moves such a face's plane out of the way first (`_resolve_face_ties`).
     """
     n = vertices.shape[0]
     # Keep the reduction over the 3-long axis: it is a fusion barrier (written as
@@ -117,20 +134,34 @@ def _clip_stage_columns(vertices, count, normal, offset):
     following = jnp.where(is_last[:, None], vertices[:1], jnp.roll(vertices, -1, axis=0))
     next_distance = jnp.where(is_last, distance[:1], jnp.roll(distance, -1, axis=0))
     active = index < count[None]
-    inside = distance <= 0.0
-    crosses = active & (inside != (next_distance <= 0.0))
+    inside = active & (distance <= 0.0)
     t = safe_div(distance, distance - next_distance)
-    crossing = vertices + t[:, None] * (following - vertices)
-    keep = active & inside
-    kept = keep.astype(count.dtype)
-    emitted = kept + crosses.astype(count.dtype)
-    emitted_by = jnp.cumsum(emitted, axis=0)  # after each vertex
-    starts = emitted_by - emitted
-    slots = jnp.concatenate([jnp.where(keep, starts, -1), jnp.where(crosses, starts + kept, -1)])  # (2n, P)
-    candidates = jnp.concatenate([vertices, crossing])  # (2n, 3, P)
-    chosen = slots[None] == jnp.arange(n + 1)[:, None, None]  # (n + 1, 2n, P)
-    out = jnp.sum(jnp.where(chosen[:, :, None], candidates[None], 0.0), axis=1)
-    return out, jnp.minimum(emitted_by[-1], n + 1)
+    crossing = vertices + t[:, None] * (following - vertices)  # of edge (i, i + 1)
+    # The outside run around the farthest vertex: e before it, b after it (cyclically).
+    farthest = jnp.argmax(jnp.where(active, distance, -jnp.inf), axis=0)
+    last_before = jnp.max(jnp.where(inside & (index < farthest[None]), index, -1), axis=0)
+    first_after = jnp.min(jnp.where(inside & (index > farthest[None]), index, n), axis=0)
+    e = jnp.where(last_before >= 0, last_before, jnp.max(jnp.where(inside, index, -1), axis=0))
+    b = jnp.where(first_after < n, first_after, jnp.min(jnp.where(inside, index, n), axis=0))
+    exit_point = _pick_columns(crossing, e)
+    entry_point = _pick_columns(crossing, jnp.where(b == 0, count - 1, b - 1))
+    prefix = (e < b) | (b == 0)  # v_0..v_e, exit, entry, v_b..; else entry, v_b..v_e, exit
+    new_count = jnp.where(prefix, e + 3 + jnp.where(b == 0, 0, count - b), e - b + 3)
+    # Slot s of the shifted run takes v_(s + shift): rows w_s = v_(s - 1), taken at s + shift + 1.
+    shift = jnp.where(prefix, b - e - 2, b)
+    shifted = jnp.concatenate([vertices[:1], vertices])
+    for bit in range(n.bit_length()):
+        shifted = jnp.where((((shift >> bit) & 1) == 1)[None, None], jnp.roll(shifted, -(1 << bit), axis=0), shifted)
+    slots = jnp.arange(n + 1)[:, None]
+    unshifted = jnp.concatenate([vertices, vertices[:1]])
+    out = jnp.where((prefix[None] & (slots <= e[None]))[:, None], unshifted, shifted)
+    out = jnp.where((slots == jnp.where(prefix, e + 1, new_count - 1)[None])[:, None], exit_point[None], out)
+    out = jnp.where((slots == jnp.where(prefix, e + 2, 0)[None])[:, None], entry_point[None], out)
+    # No vertex outside: the polygon as it was; none inside: nothing.
+    cut = jnp.any(active & ~inside, axis=0)
+    out = jnp.where(cut[None, None], out, unshifted)
+    new_count = jnp.where(cut, jnp.where(jnp.any(inside, axis=0), new_count, 0), count)
+    return jnp.where((slots < new_count[None])[:, None], out, 0.0), new_count
 
 
 def clip_polygon_by_tet_faces_columns(vertices, count, face_normals, face_offsets):

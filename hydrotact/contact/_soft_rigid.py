@@ -299,8 +299,15 @@ def calc_soft_rigid_surface(
         near, near_valid, num_near = compact_indices(near_mask, capacity.tets)
         near_tets = safe_candidates[jnp.maximum(near, 0)]
         near_rows = tet_rows[near_tets]
-        # The triangles near the soft body; their full rows only for those.
-        tris, tris_valid, num_tris = compact_indices(boxes_overlap(tri_lo, tri_hi, region_lo[None], region_hi[None]), capacity.others)
+        # The triangles near the soft body: in the region and meeting the box of a
+        # cluster found (every near tet lies in one), which on a curved sensor leaves
+        # the part of a probe over the skin near the press, not all of it inside the
+        # sensor's box; their full rows only for those.
+        hit_lo = jnp.where(hit_valid[:, None], cluster_lo[jnp.maximum(hit, 0)], big)
+        hit_hi = jnp.where(hit_valid[:, None], cluster_hi[jnp.maximum(hit, 0)], -big)
+        near_clusters = jnp.any(boxes_overlap(tri_lo[:, None], tri_hi[:, None], hit_lo[None], hit_hi[None]), axis=1)
+        near_triangles = boxes_overlap(tri_lo, tri_hi, region_lo[None], region_hi[None]) & near_clusters
+        tris, tris_valid, num_tris = compact_indices(near_triangles, capacity.others)
         tris = jnp.maximum(tris, 0)
         tri_rows = _triangle_rows(triangles[tris], tri_lo[tris], tri_hi[tris])
         # Every near tet against every near triangle by their boxes (cheap, dense);
