@@ -116,8 +116,8 @@ def _clip_stage_columns(vertices, count, normal, offset):
     Each output slot takes its vertex unshifted, one of the two crossings, or the
     vertex a per-polygon shift further on, shifted in log2(n) steps: a few selects
     per slot, where emitting every candidate at a running count and picking each
-    slot's by a one-hot sum over 2n candidates cost (n + 1) 2n (3.6x slower, issue
-    48). The output is that of :func:`clip_polygon` vertex for vertex whenever the
+    slot's by a one-hot sum over 2n candidates cost (n + 1) 2n (3.6x slower alone;
+    in the soft-rigid kernel, 1.0-1.16x: benchmarks/RESULTS.md, issue 48). The output is that of :func:`clip_polygon` vertex for vertex whenever the
     inside vertices are one run; where round-off splits them (vertices within
     round-off of the plane, on either side), the other runs count as inside: they
     differ from the plane by round-off. A polygon lying in the plane (every distance
