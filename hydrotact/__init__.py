@@ -21,5 +21,8 @@ command; no stage imports either. Units are SI throughout (m, Pa, N, s, rad).
 """
 
 from ._errors import HydrotactError as HydrotactError, HydrotactWarning as HydrotactWarning
+from ._malloc import keep_freed_memory
+
+keep_freed_memory()  # XLA's per-call working memory reused warm (see _malloc.py; HYDROTACT_MALLOC=system to opt out)
 
 __version__ = "0.1.0"

@@ -2,6 +2,10 @@
 against NumPy."""
 
 import dataclasses
+import os
+import platform
+import subprocess
+import sys
 
 import equinox as eqx
 import jax
@@ -138,3 +142,32 @@ def test_capacity_shrinks_to_a_batch_far_below_it():
     assert capacity == _Pair(30, 52) and not result.did_overflow.any()
     _, capacity = run_growing(compute(np.array([[200, 50]])), capacity)  # and growing again, never truncated
     assert capacity == _Pair(208, 52)
+
+
+_MMAPPED_BYTES = """
+import ctypes, sys
+import numpy as np
+import hydrotact  # noqa: F401 (its import sets malloc up)
+
+class Info(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_size_t) for name in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks", "keepcost")]
+
+libc = ctypes.CDLL("libc.so.6")
+libc.mallinfo2.restype = Info
+before = libc.mallinfo2().hblkhd  # bytes in mmap'd blocks (some from before the import)
+block = np.ones(64 * 2**20 // 8)  # 64 MB, above glibc's largest mmap threshold
+print(libc.mallinfo2().hblkhd - before)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or platform.libc_ver()[0] != "glibc", reason="glibc's malloc only")
+def test_importing_hydrotact_keeps_large_blocks_in_the_heap():
+    """XLA's per-call temporaries come from malloc; with hydrotact imported, a 64 MB
+    block comes from the heap (kept, reused warm), not from fresh mmap'd pages, unless
+    HYDROTACT_MALLOC=system (benchmarks/RESULTS.md, issue 48)."""
+    def mmapped(**env):
+        out = subprocess.run([sys.executable, "-c", _MMAPPED_BYTES], capture_output=True, text=True, env={**os.environ, **env}, timeout=120, check=True)
+        return int(out.stdout.split()[-1])
+
+    assert mmapped() == 0
+    assert mmapped(HYDROTACT_MALLOC="system") >= 64 * 2**20
