@@ -25,7 +25,7 @@ _NEVER = 2**31 - 1  # mallopt takes an int
 
 def keep_freed_memory() -> bool:
     """Tell glibc's malloc to serve every block from the heap and never shrink it
-    (once a process; idempotent). **Returns:** whether it took effect."""
+    (idempotent). **Returns:** whether it took effect."""
     if os.environ.get("HYDROTACT_MALLOC", "").lower() == "system":
         return False
     try:
