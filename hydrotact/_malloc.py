@@ -25,14 +25,16 @@ _NEVER = 2**31 - 1  # mallopt takes an int
 
 def keep_freed_memory() -> bool:
     """Tell glibc's malloc to serve every block from the heap and never shrink it
-    (idempotent). **Returns:** whether it took effect."""
+    (idempotent). **Returns:** whether glibc's mallopt accepted both settings (it also
+    does where another malloc was preloaded, which then ignores them)."""
     if os.environ.get("HYDROTACT_MALLOC", "").lower() == "system":
         return False
     try:
         libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        libc.gnu_get_libc_version  # glibc only  # noqa: B018
-        mallopt = libc.mallopt
-    except (OSError, AttributeError):
+    except OSError:
         return False
+    if not (hasattr(libc, "gnu_get_libc_version") and hasattr(libc, "mallopt")):  # glibc only
+        return False
+    mallopt = libc.mallopt
     mallopt.argtypes, mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
     return bool(mallopt(M_MMAP_MAX, 0)) and bool(mallopt(M_TRIM_THRESHOLD, _NEVER))
