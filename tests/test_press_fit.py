@@ -124,20 +124,37 @@ def test_one_log_recovers_the_shape_onsets_and_lag(one_log_fit):
 
 
 def test_a_fit_far_from_the_noise_tries_other_shapes(one_log_fit, stand_in, monkeypatch):
-    """starts="auto": a fit that ends above a reduced χ² of 1.5 is tried from the next
-    relaxation shape, and the lowest χ² is kept. Here a first start of τ x 0.05 and
-    Eᵢ/E∞ 0.01 is put before the default ones: from it alone the fit ends in a local
-    minimum (reduced χ² 4.4, τ 0.035 s and 64 s); "auto" goes on to the next start,
-    which is the default fit's. (The default starts' own case: notebook 02's stage
-    log cut before its gap, 2 presses, 40 % relaxation, ends at 10.8 from the first
-    and at 1.01 from the second.)"""
+    """starts="auto": a fit that ends above a reduced χ² of RESTART_REDUCED_CHI2 is
+    tried from the next relaxation shape, and the lowest χ² is kept. Here a first
+    start of τ x 0.05 and Eᵢ/E∞ 0.01 is put before the default ones: from it alone the
+    fit ends in a worse local minimum than the default start's (reduced χ² 4.4 on the
+    Intel Xeon and the earlier AMD EPYC machines, 1.18 on another AMD EPYC, 2026-12-07:
+    which minimum it reaches depends on the machine's round-off, so the threshold is
+    put between the two ends as this machine finds them); "auto" goes on to the next
+    start, which is the default fit's. (The default starts' own case: notebook 02's
+    stage log cut before its gap, 2 presses, 40 % relaxation, ends at 10.8 from the
+    first and at 1.01 from the second.)"""
     default, truth, _ = one_log_fit
     path, log, _ = stand_in["calibration"][0]
+    ends = []  # each start's own χ² at the end of its solve, before the onset scan
+    solve = press_solve_module._solve_from
+
+    def recorded(*args, **kwargs):
+        solved = solve(*args, **kwargs)
+        ends.append(float(solved[2][0]))
+        return solved
+
+    monkeypatch.setattr(press_solve_module, "_solve_from", recorded)
+    fit_press_logs([log], [str(path)], terms=2, estimate_lag=True, saturation_pa=125e3, starts=1)
+    default_end = ends[-1]
+    assert default.num_starts == 1 and default_end / default.dof < press_solve_module.RESTART_REDUCED_CHI2
     monkeypatch.setattr(press_solve_module, "SHAPE_STARTS", ((0.05, 0.01), *press_solve_module.SHAPE_STARTS))
     alone = fit_press_logs([log], [str(path)], terms=2, estimate_lag=True, saturation_pa=125e3, starts=1)
-    assert alone.num_starts == 1 and alone.reduced_chi_square > press_solve_module.RESTART_REDUCED_CHI2
+    bad_end = ends[-1]
+    assert alone.num_starts == 1 and bad_end > 1.05 * default_end and alone.chi_square > default.chi_square
+    monkeypatch.setattr(press_solve_module, "RESTART_REDUCED_CHI2", float(np.sqrt(bad_end * default_end)) / default.dof)
     again = fit_press_logs([log], [str(path)], terms=2, estimate_lag=True, saturation_pa=125e3)
-    assert again.num_starts == 2 and default.num_starts == 1
+    assert again.num_starts == 2
     assert again.chi_square == pytest.approx(default.chi_square, rel=1e-9)
     every = fit_press_logs([log], [str(path)], terms=2, estimate_lag=True, saturation_pa=125e3, starts=3)
     assert every.num_starts == 3 and every.chi_square <= again.chi_square * (1 + 1e-9)
