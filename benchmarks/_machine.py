@@ -21,6 +21,7 @@ def describe_machine() -> dict:
     return {
         "cpu": cpu,
         "cores": os.cpu_count(),
+        "cores_usable": len(os.sched_getaffinity(0)),  # fewer under taskset
         "jax": jax.__version__,
         "jax_backend": jax.default_backend(),
         "device": getattr(device, "device_kind", str(device)),
@@ -39,14 +40,14 @@ def write_results(name: str, machine: dict, rows: list) -> Path:
     return out
 
 
-def time_over_poses(per_pose, translations, chunk: int, repeats: int):
-    """Time `per_pose(row)` over a batch of rows (count, 3 or more) in one
-    jitted call: vmap over chunks of `chunk` poses, lax.map over the chunks (the last
-    chunk padded with repeats of the last pose). Compiles and runs once first.
+def batched_over_poses(per_pose, translations, chunk: int):
+    """Compile `per_pose(row)` over a batch of rows (count, 3 or more) as one jitted
+    call: vmap over chunks of `chunk` poses, lax.map over the chunks (the last chunk
+    padded with repeats of the last pose). Compiles and runs once.
 
-    **Returns:** (median seconds per batch, the outputs with the padding removed).
+    **Returns:** (time_once, the outputs with the padding removed): `time_once()` runs
+    the batch once more and returns its seconds.
     """
-    import statistics
     import time
 
     import jax
@@ -64,10 +65,21 @@ def time_over_poses(per_pose, translations, chunk: int, repeats: int):
         return jax.lax.map(jax.vmap(per_pose), batch.reshape(-1, chunk, width))
 
     result = jax.block_until_ready(run(batch))
-    timings = []
-    for _ in range(repeats):
+
+    def time_once():
         start = time.perf_counter()
         jax.block_until_ready(run(batch))
-        timings.append(time.perf_counter() - start)
-    unpadded = jax.tree_util.tree_map(lambda a: np.asarray(a).reshape(padded, *a.shape[2:])[:count], result)
-    return statistics.median(timings), unpadded
+        return time.perf_counter() - start
+
+    return time_once, jax.tree_util.tree_map(lambda a: np.asarray(a).reshape(padded, *a.shape[2:])[:count], result)
+
+
+def time_over_poses(per_pose, translations, chunk: int, repeats: int):
+    """`batched_over_poses`, timed `repeats` times.
+
+    **Returns:** (median seconds per batch, the outputs with the padding removed).
+    """
+    import statistics
+
+    time_once, outputs = batched_over_poses(per_pose, translations, chunk)
+    return statistics.median(time_once() for _ in range(repeats)), outputs

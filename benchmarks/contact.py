@@ -13,17 +13,26 @@ Drake computes the same surfaces from the same meshes (tests/test_contact_drake.
 checks they agree).
 
 - Drake: `QueryObject.ComputeContactSurfaces` (polygons), one pose at a time, after
-  updating the free body's pose; mean seconds per query.
+  updating the free body's pose; mean seconds per query over a pass of its poses.
 - hydrotact: the contact surface and its wrench for a batch of poses in one jitted
   call (vmap over chunks of poses, lax.map over chunks: by default chunks of
   hydrotact's CPU_POSE_GROUP on a CPU, the whole batch on an accelerator), float64,
   with the clustered tet search, the buffers grown to the batch's poses; timed after
-  compilation, median of repeats.
+  compilation.
+- Timed in turn: `--rounds` rounds, each one pass of Drake's and one call of each
+  batch; the table gives the medians over the rounds, and the range of each rate and
+  of the rounds' own ratios (on a 2-core CPU hydrotact's rate moves up to 2x
+  between calls, Drake's 10 %). `taskset -c 0` before the command compares one core
+  against one core.
 
 Run: `.venv/bin/python benchmarks/contact.py [--batches 1 64 1024] [--cases box sphere8]`.
 """
 
 import argparse
+import collections
+import gzip
+import json
+import re
 import statistics
 import sys
 import tempfile
@@ -36,11 +45,12 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from _machine import describe_machine, time_over_poses, write_results  # noqa: E402
+from _machine import batched_over_poses, describe_machine, write_results  # noqa: E402
 from scipy.spatial.transform import Rotation  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "tests"))
 from drake_reference import DrakeScene  # noqa: E402
+from helpers import lowest_vertex  # noqa: E402
 
 from hydrotact.contact import (  # noqa: E402
     CPU_POSE_GROUP,
@@ -67,13 +77,39 @@ EDGE_FIRST = np.array([np.pi / 4, 0.0, 0.0])
 CORNER_FIRST = Rotation.align_vectors([[0.0, 0.0, -1.0]], [np.array([2.0, 2.0, 1.0]) / 3.0])[0].as_rotvec()  # the box's corner (2, 2, 1) mm down
 
 
+# The probes, as `hydrotact.contact` makes them (Drake reads each from an .obj of it).
+PROBES = {
+    "cylinder": lambda: make_cylinder_probe(2e-3, length=6e-3),
+    "tilted": lambda: make_cylinder_probe(2e-3),
+    "box": lambda: make_box_probe((4e-3, 4e-3, 2e-3)),
+    "sphere": lambda: make_sphere_probe(3e-3),
+}
+
+
+# case: (sensor, probe name in PROBES or "half-space", draw(count, probe, rng)); each
+# case's poses are seeded by its name (case_rng).
+CASES = {
+    "pad5x5 + 2 mm cylinder": ("pad5x5", "cylinder", lambda n, probe, r: _pad_poses(n, probe, np.zeros(3), r)),
+    "pad5x5 + tilted 2 mm cylinder": ("pad5x5", "tilted", lambda n, probe, r: _pad_poses(n, probe, TILTED, r)),
+    "pad5x5 + edge-first box": ("pad5x5", "box", lambda n, probe, r: _pad_poses(n, probe, EDGE_FIRST, r)),
+    "pad5x5 + corner-first box": ("pad5x5", "box", lambda n, probe, r: _pad_poses(n, probe, CORNER_FIRST, r)),
+    "sphere8 + 6 mm sphere (generator)": ("sphere8", "sphere", lambda n, probe, r: _curved_poses("sphere8", n, r)),
+    "ellipsoid8 + 6 mm sphere (generator)": ("ellipsoid8", "sphere", lambda n, probe, r: _curved_poses("ellipsoid8", n, r)),
+    "sphere8 + half-space": ("sphere8", "half-space", lambda n, probe, r: _half_space_poses(n, r)),
+}
+
+
+def case_rng(seed, case):
+    """The random generator of `case`'s poses."""
+    return np.random.default_rng([seed, sum(map(ord, case))])
+
+
 def _pad_poses(count, probe, rotation_vector, rng):
     """(count, 6): translations and rotation vectors of `probe` turned by
     `rotation_vector`, at x, y uniform within 4.4 mm of the pad's centre and its lowest
     point 0.1-0.5 mm below the top."""
-    lowest = np.min(np.asarray(probe.vertices_R) @ np.asarray(make_pose((0, 0, 0), rotation_vector).rotation).T, axis=0)[2]
     xy = rng.uniform(-4.4e-3, 4.4e-3, (count, 2))
-    z = PAD_TOP - rng.uniform(*PAD_DEPTHS, count) - lowest
+    z = PAD_TOP - rng.uniform(*PAD_DEPTHS, count) - lowest_vertex(probe, rotation_vector)[2]
     return np.column_stack([xy, z, np.tile(rotation_vector, (count, 1))])
 
 
@@ -104,25 +140,29 @@ def _matrix(row):
     return X
 
 
-def _drake_seconds_per_query(vtk_path, other, poses, repeats=3):
-    """Drake's seconds per query. The other body is fixed in the world (the
-    half-space turned upside down: Drake's is solid below z = 0, ours above) and the
-    sensor moves to the pose that gives the same relative pose as ours."""
+def _drake_timer(vtk_path, other, poses):
+    """A function timing one pass of Drake's queries over `poses` (seconds a query).
+    The other body is fixed in the world (the half-space turned upside down: Drake's is
+    solid below z = 0, ours above) and the sensor moves to the pose that gives the same
+    relative pose as ours."""
     flip = np.diag([1.0, -1.0, -1.0, 1.0]) if type(other).__name__ == "HalfSpace" else np.eye(4)
     scene = DrakeScene(vtk_path, MODULUS, other, X_WO=flip)
-    counts, timings = [], []
     # Drake's other body in ours is X_OO' = flip, so X_WS = X_WO' X_O'S = flip flip⁻¹ X_SO⁻¹ = X_SO⁻¹.
     sensor_poses = [np.linalg.inv(_matrix(row)) for row in poses]
-    for _ in range(repeats):
+    assert all(len(scene.query(X_WS)) == 1 for X_WS in sensor_poses), "every benchmark pose must be in contact"
+
+    def time_once():
         start = time.perf_counter()
         for X_WS in sensor_poses:
-            counts.append(len(scene.query(X_WS)))
-        timings.append((time.perf_counter() - start) / len(poses))
-    assert min(counts) == 1, "every benchmark pose must be in contact"
-    return statistics.median(timings)
+            scene.query(X_WS)
+        return (time.perf_counter() - start) / len(poses)
+
+    return time_once
 
 
-def _ours_seconds_per_batch(field, other, poses, capacity, chunk, repeats=3):
+def _wrench(field, other, capacity):
+    """hydrotact's timed work for one pose row: the surface's force, torque, area and
+    whether its buffers overflowed."""
     clusters = make_tet_clusters(field.vertices, field.tets)
 
     def wrench(row):
@@ -130,51 +170,78 @@ def _ours_seconds_per_batch(field, other, poses, capacity, chunk, repeats=3):
         force, torque = surface.calc_wrench()
         return force, torque, surface.total_area, surface.did_overflow
 
-    seconds, result = time_over_poses(wrench, poses, chunk, repeats)
+    return wrench
+
+
+def _ours_timer(field, other, poses, capacity, chunk):
+    """A function timing one jitted call of hydrotact's surfaces and wrenches over
+    `poses` (seconds a batch), compiled and checked for overflow first."""
+    time_once, result = batched_over_poses(_wrench(field, other, capacity), poses, chunk)
     assert not bool(np.any(result[3])), "capacity too small for the benchmark poses"
-    return seconds, result[0]
+    return time_once
+
+
+def time_by_buffer(wrench, poses, capacity, chunk):
+    """XLA's own per-fusion times (`jax.profiler.trace`) of one jitted batch of
+    `wrench(row)` over `poses`, chunks of `chunk`, summed by the buffer each fusion's
+    output is sized by, so that the stage that costs shows by its buffer (polygons,
+    pairs, ...).
+
+    **Returns:** ({buffer: microseconds a pose}, [(microseconds a pose, fusion, its
+    output's shape)] of the five costliest fusions).
+    """
+    batch = jnp.asarray(poses).reshape(-1, chunk, poses.shape[1])
+    run = jax.jit(lambda batch: jax.lax.map(jax.vmap(wrench), batch))
+    jax.block_until_ready(run(batch))
+    names = {capacity.polygons: "polygons", capacity.pairs: "candidate pairs", capacity.others: "near triangles", capacity.tets: "near tets"}
+    shapes, buffers = {}, {}
+    for line in run.lower(batch).compile().as_text().splitlines():
+        match = re.match(r"\s*(?:ROOT )?%?([\w.\-]+) = \(?(\w+\[([\d,]*)\])", line)
+        if match:
+            sizes = [int(d) for d in match.group(3).split(",") if d]
+            shapes[match.group(1)] = match.group(2)
+            buffers[match.group(1)] = next((names[d] for d in sizes if d in names), "other")
+    fusions = collections.Counter()
+    repeats = 3
+    with tempfile.TemporaryDirectory() as trace_dir:
+        with jax.profiler.trace(trace_dir, create_perfetto_trace=True):
+            for _ in range(repeats):
+                jax.block_until_ready(run(batch))
+        (trace,) = Path(trace_dir).rglob("*.trace.json.gz")
+        events = json.load(gzip.open(trace))
+    for event in events["traceEvents"] if isinstance(events, dict) else events:
+        if event.get("ph") == "X" and event["name"] in shapes:
+            fusions[event["name"]] += event.get("dur", 0) / repeats / len(poses)
+    totals = collections.Counter()
+    for name, microseconds in fusions.items():
+        totals[buffers[name]] += microseconds
+    return dict(totals.most_common()), [(microseconds, name, shapes[name]) for name, microseconds in fusions.most_common(5)]
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--batches", type=int, nargs="+", default=[1, 64, 1024])
-    parser.add_argument(
-        "--chunk", type=int, help="poses per vmapped chunk (lax.map over chunks); default: CPU_POSE_GROUP on a CPU, the batch elsewhere"
-    )
+    parser.add_argument("--chunk", type=int, help="poses per vmapped chunk (lax.map over chunks); default: CPU_POSE_GROUP on a CPU, the batch elsewhere")
     parser.add_argument("--cases", nargs="+", help="run only the cases whose names contain one of these words")
     parser.add_argument("--drake-poses", type=int, default=256, help="poses Drake is timed over (each case's first ones)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--rounds", type=int, default=5, help="rounds of Drake's pass and hydrotact's batches timed in turn")
+    parser.add_argument("--no-profile", action="store_true", help="skip XLA's profile of the case furthest under Drake")
     args = parser.parse_args()
     from pydrake.geometry import HalfSpace as DrakeHalfSpace
 
     machine = describe_machine()
     print(f"machine: {machine}")
-    print("| case | batch | hydrotact surfaces/s | Drake surfaces/s | ratio |\n|---|---:|---:|---:|---:|")
-    rows = []
+    print("| case | batch | hydrotact surfaces/s (rounds' range) | Drake surfaces/s (rounds' range) | ratio of medians (rounds' range) |\n|---|---:|---:|---:|---:|")
+    rows, profiled = [], {}
     largest = max(args.batches)
     with tempfile.TemporaryDirectory() as scratch:
-        probes = {
-            "cylinder": make_cylinder_probe(2e-3, length=6e-3),
-            "tilted": make_cylinder_probe(2e-3),
-            "box": make_box_probe((4e-3, 4e-3, 2e-3)),
-            "sphere": make_sphere_probe(3e-3),
-        }
+        probes = {name: make() for name, make in PROBES.items()}
         paths = {}
         for name, probe in probes.items():
             paths[name] = str(Path(scratch) / f"{name}.obj")
             probe.write_obj(paths[name])
-        rng = lambda case: np.random.default_rng([args.seed, sum(map(ord, case))])
-        cases = {
-            "pad5x5 + 2 mm cylinder": ("pad5x5", "cylinder", lambda n, r: _pad_poses(n, probes["cylinder"], np.zeros(3), r)),
-            "pad5x5 + tilted 2 mm cylinder": ("pad5x5", "tilted", lambda n, r: _pad_poses(n, probes["tilted"], TILTED, r)),
-            "pad5x5 + edge-first box": ("pad5x5", "box", lambda n, r: _pad_poses(n, probes["box"], EDGE_FIRST, r)),
-            "pad5x5 + corner-first box": ("pad5x5", "box", lambda n, r: _pad_poses(n, probes["box"], CORNER_FIRST, r)),
-            "sphere8 + 6 mm sphere (generator)": ("sphere8", "sphere", lambda n, r: _curved_poses("sphere8", n, r)),
-            "ellipsoid8 + 6 mm sphere (generator)": ("ellipsoid8", "sphere", lambda n, r: _curved_poses("ellipsoid8", n, r)),
-            "sphere8 + half-space": ("sphere8", "half-space", lambda n, r: _half_space_poses(n, r)),
-        }
-        if args.cases:
-            cases = {case: cases[case] for case in cases if any(word in case for word in args.cases)}
+        cases = {case: CASES[case] for case in CASES if not args.cases or any(word in case for word in args.cases)}
         fields = {}
         for case, (sensor, probe_name, draw) in cases.items():
             if sensor not in fields:
@@ -184,28 +251,51 @@ def main():
             vtk, field = fields[sensor]
             ours_other = HalfSpace() if probe_name == "half-space" else probes[probe_name]
             drake_other = DrakeHalfSpace() if probe_name == "half-space" else paths[probe_name]
-            poses = draw(largest, rng(case))
-            drake_seconds = _drake_seconds_per_query(vtk, drake_other, poses[: args.drake_poses])
+            poses = draw(largest, probes.get(probe_name), case_rng(args.seed, case))
+            drake = _drake_timer(vtk, drake_other, poses[: args.drake_poses])
             # Start small and let compute_contact_surface grow the buffers to every pose of the case.
             X_SO = jax.vmap(make_pose)(jnp.asarray(poses[:, :3]), jnp.asarray(poses[:, 3:]))
             _, capacity = compute_contact_surface(field, ours_other, X_SO, Capacity(64, 64, 64, 256))
+            chunks = {batch: min(args.chunk or (CPU_POSE_GROUP if jax.default_backend() == "cpu" else batch), batch) for batch in args.batches}
+            ours = {batch: _ours_timer(field, ours_other, poses[:batch], capacity, chunks[batch]) for batch in args.batches}
+            profiled[case] = (field, ours_other, poses, capacity)
+            # Timed in turn, so that both see the same moments of the machine (hydrotact's
+            # rate, on two threads, moves more between moments than Drake's on one).
+            drake_rates, our_rates = [], {batch: [] for batch in args.batches}
+            for _ in range(args.rounds):
+                drake_rates.append(1.0 / drake())
+                for batch in args.batches:
+                    our_rates[batch].append(batch / ours[batch]())
             for batch in args.batches:
-                chunk = args.chunk or (CPU_POSE_GROUP if jax.default_backend() == "cpu" else batch)
-                seconds, _ = _ours_seconds_per_batch(field, ours_other, poses[:batch], capacity, chunk)
+                mine, theirs = statistics.median(our_rates[batch]), statistics.median(drake_rates)
+                ratios = [a / b for a, b in zip(our_rates[batch], drake_rates, strict=True)]
                 row = {
                     "case": case,
                     "batch": batch,
                     "capacity": list(capacity.sizes),
-                    "chunk": min(chunk, batch),
-                    "ours_surfaces_per_s": batch / seconds,
-                    "drake_surfaces_per_s": 1.0 / drake_seconds,
-                    "ratio": (batch / seconds) * drake_seconds,
+                    "chunk": chunks[batch],
+                    "ours_surfaces_per_s": mine,
+                    "drake_surfaces_per_s": theirs,
+                    "ratio": mine / theirs,
+                    "ours_rounds": our_rates[batch],
+                    "drake_rounds": drake_rates,
                 }
                 rows.append(row)
                 print(
-                    f"| {case} | {batch} | {row['ours_surfaces_per_s']:,.0f} | {row['drake_surfaces_per_s']:,.0f} | {row['ratio']:.2f} |",
+                    f"| {case} | {batch} | {mine:,.0f} ({min(our_rates[batch]):,.0f}-{max(our_rates[batch]):,.0f}) "
+                    f"| {theirs:,.0f} ({min(drake_rates):,.0f}-{max(drake_rates):,.0f}) | {row['ratio']:.2f} ({min(ratios):.2f}-{max(ratios):.2f}) |",
                     flush=True,
                 )
+    if not args.no_profile:
+        # The case furthest under Drake at the smallest batch of 64 or more: where its time goes.
+        batch = min((b for b in args.batches if b >= 64), default=min(args.batches))
+        slowest = min((row for row in rows if row["batch"] == batch), key=lambda row: row["ratio"])
+        field, other, poses, capacity = profiled[slowest["case"]]
+        chunk = slowest["chunk"]
+        by_buffer, fusions = time_by_buffer(_wrench(field, other, capacity), poses[: batch - batch % chunk], capacity, chunk)
+        print(f"profile of the case furthest under Drake, {slowest['case']} (batch {batch}, buffers {capacity.sizes}), XLA's fusion times:")
+        print("  us a pose by the buffer a fusion's output is sized by: " + ", ".join(f"{k} {v:.0f}" for k, v in by_buffer.items()))
+        print("  costliest fusions: " + "; ".join(f"{name} {shape} {us:.0f} us" for us, name, shape in fusions))
     print(f"written: {write_results('contact', machine, rows)}")
 
 

@@ -17,13 +17,8 @@ Run: `.venv/bin/python benchmarks/contact_ab.py REV [--cases tilted sphere8] [--
 """
 
 import argparse
-import collections
-import gzip
-import json
-import re
 import subprocess
 import sys
-import tempfile
 import types
 from pathlib import Path
 
@@ -31,13 +26,13 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
+import contact  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 from _machine import describe_machine, time_over_poses  # noqa: E402
-from contact import CORNER_FIRST, EDGE_FIRST, TILTED, _curved_poses, _pad_poses  # noqa: E402
 
 import hydrotact.contact._soft_rigid as working  # noqa: E402
-from hydrotact.contact import Capacity, make_box_probe, make_cylinder_probe, make_pose, make_sphere_probe, make_tet_clusters  # noqa: E402
+from hydrotact.contact import Capacity, make_pose, make_tet_clusters  # noqa: E402
 from hydrotact.field import calc_distance_field, make_pressure_field  # noqa: E402
 from hydrotact.mesh import make_seed_mesh  # noqa: E402
 
@@ -45,14 +40,14 @@ ROOT = Path(__file__).parents[1]
 POSES = 64
 CHUNK = 16
 
-# name: (sensor, probe, draw(count, probe, rng), the seed's case name in contact.py)
+# name: benchmarks/contact.py's case (its sensor, probe and seeded poses)
 CASES = {
-    "upright": ("pad5x5", lambda: make_cylinder_probe(2e-3, length=6e-3), lambda n, p, r: _pad_poses(n, p, np.zeros(3), r), "pad5x5 + 2 mm cylinder"),
-    "tilted": ("pad5x5", lambda: make_cylinder_probe(2e-3), lambda n, p, r: _pad_poses(n, p, TILTED, r), "pad5x5 + tilted 2 mm cylinder"),
-    "edge": ("pad5x5", lambda: make_box_probe((4e-3, 4e-3, 2e-3)), lambda n, p, r: _pad_poses(n, p, EDGE_FIRST, r), "pad5x5 + edge-first box"),
-    "corner": ("pad5x5", lambda: make_box_probe((4e-3, 4e-3, 2e-3)), lambda n, p, r: _pad_poses(n, p, CORNER_FIRST, r), "pad5x5 + corner-first box"),
-    "sphere8": ("sphere8", lambda: make_sphere_probe(3e-3), lambda n, p, r: _curved_poses("sphere8", n, r), "sphere8 + 6 mm sphere (generator)"),
-    "ellipsoid8": ("ellipsoid8", lambda: make_sphere_probe(3e-3), lambda n, p, r: _curved_poses("ellipsoid8", n, r), "ellipsoid8 + 6 mm sphere (generator)"),
+    "upright": "pad5x5 + 2 mm cylinder",
+    "tilted": "pad5x5 + tilted 2 mm cylinder",
+    "edge": "pad5x5 + edge-first box",
+    "corner": "pad5x5 + corner-first box",
+    "sphere8": "sphere8 + 6 mm sphere (generator)",
+    "ellipsoid8": "ellipsoid8 + 6 mm sphere (generator)",
 }
 
 
@@ -84,38 +79,6 @@ def _grown(kernel, field, probe, X, clusters):
     raise RuntimeError("the buffers did not settle")
 
 
-def _by_buffer(wrench, poses, capacity):
-    """XLA's per-fusion times of one jitted batch, summed by the buffer each fusion's
-    output is sized by (microseconds a pose)."""
-    batch = jnp.asarray(poses).reshape(-1, CHUNK, poses.shape[1])
-    run = jax.jit(lambda batch: jax.lax.map(jax.vmap(wrench), batch))
-    jax.block_until_ready(run(batch))
-    names = {
-        capacity.polygons: "polygons",
-        capacity.pairs: "candidate pairs",
-        capacity.others: "near triangles",
-        capacity.tets: "near tets",
-    }
-    shapes = {}
-    for line in run.lower(batch).compile().as_text().splitlines():
-        match = re.match(r"\s*(?:ROOT )?%?([\w.\-]+) = \(?\w+\[([\d,]*)\]", line)
-        if match:
-            sizes = [int(d) for d in match.group(2).split(",") if d]
-            shapes[match.group(1)] = next((names[d] for d in sizes if d in names), "other")
-    totals = collections.Counter()
-    repeats = 3
-    with tempfile.TemporaryDirectory() as trace_dir:
-        with jax.profiler.trace(trace_dir, create_perfetto_trace=True):
-            for _ in range(repeats):
-                jax.block_until_ready(run(batch))
-        (trace,) = Path(trace_dir).rglob("*.trace.json.gz")
-        events = json.load(gzip.open(trace))
-    for event in events["traceEvents"] if isinstance(events, dict) else events:
-        if event.get("ph") == "X" and event["name"] in shapes:
-            totals[shapes[event["name"]]] += event.get("dur", 0)
-    return {buffer: total / repeats / len(poses) for buffer, total in totals.most_common()}
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("revision", help="the git revision whose kernel is the baseline (e.g. HEAD~1)")
@@ -127,14 +90,14 @@ def main():
     print(f"| case | {args.revision} surfaces/s | working tree surfaces/s | speedup | force rel. difference |\n|---|---:|---:|---:|---:|")
     fields = {}
     for name in args.cases:
-        sensor, make_probe, draw, seed_name = CASES[name]
+        sensor, probe_name, draw = contact.CASES[CASES[name]]
         if sensor not in fields:
             mesh = make_seed_mesh(sensor)
             field = make_pressure_field(mesh, calc_distance_field(mesh), 2e5)
             fields[sensor] = (field, make_tet_clusters(field.vertices, field.tets))
         field, clusters = fields[sensor]
-        probe = make_probe()
-        poses = draw(POSES, probe, np.random.default_rng([0, sum(map(ord, seed_name))]))
+        probe = contact.PROBES[probe_name]()
+        poses = draw(POSES, probe, contact.case_rng(0, CASES[name]))
         X = jax.vmap(make_pose)(jnp.asarray(poses[:, :3]), jnp.asarray(poses[:, 3:]))
         kernels = {"baseline": baseline, "working": working}
         capacities = {label: _grown(kernel, field, probe, X, clusters) for label, kernel in kernels.items()}
@@ -158,7 +121,7 @@ def main():
         difference = np.max(np.abs(forces["baseline"] - forces["working"])) / np.max(np.abs(forces["baseline"]))
         print(f"| {name} | {POSES / old:,.0f} | {POSES / new:,.0f} | {old / new:.2f} | {difference:.1e} |", flush=True)
         if args.trace:
-            parts = _by_buffer(wrench(working, capacities["working"]), poses, capacities["working"])
+            parts, _ = contact.time_by_buffer(wrench(working, capacities["working"]), poses, capacities["working"], CHUNK)
             print("  working tree, us a pose by buffer " + str(capacities["working"].sizes) + ": " + ", ".join(f"{k} {v:.0f}" for k, v in parts.items()))
 
 

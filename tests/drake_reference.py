@@ -8,6 +8,7 @@ and centroid.
 """
 
 import numpy as np
+from helpers import lowest_vertex
 
 
 def _rigid_transform(X):
@@ -136,11 +137,9 @@ def off_axis_case(label, scratch, modulus):
     mesh, _ = read_mesh(path)
     field = make_pressure_field(mesh, calc_distance_field(mesh), modulus)
     probe = parse_probe(spec)
-    rotation = np.asarray(make_pose(np.zeros(3), rotation_vector).rotation)
-    lowest = 0.0 if isinstance(probe, HalfSpace) else float(np.min(np.asarray(probe.vertices_R) @ rotation.T, axis=0)[2])
     X = np.eye(4)
-    X[:3, :3] = rotation
-    X[:3, 3] = [x, y, calc_skin_height(mesh, x, y) - depth - lowest]
+    X[:3, :3] = np.asarray(make_pose(np.zeros(3), rotation_vector).rotation)
+    X[:3, 3] = [x, y, calc_skin_height(mesh, x, y) - depth - lowest_vertex(probe, rotation_vector)[2]]
     if isinstance(probe, HalfSpace):
         drake = drake_contact_surfaces(path, modulus, DrakeHalfSpace(), X_WO=pressing_plane_pose(X[2, 3]))
     else:

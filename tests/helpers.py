@@ -28,6 +28,17 @@ def box_surface(extents=(6e-3, 6e-3, 3e-3)):
     return surface
 
 
+def lowest_vertex(probe, rotation_vector):
+    """The probe's lowest vertex along z (3,), in its frame R turned by
+    `rotation_vector`; R's origin for a half-space."""
+    from hydrotact.contact import HalfSpace, make_pose
+
+    if isinstance(probe, HalfSpace):
+        return np.zeros(3)
+    turned = np.asarray(probe.vertices_R) @ np.asarray(make_pose(np.zeros(3), rotation_vector).rotation).T
+    return turned[np.argmin(turned[:, 2])]
+
+
 def run_cli(*args, cwd=None):
     """Run `hydrotact ARGS` in a subprocess; returns CompletedProcess (text)."""
     return subprocess.run(

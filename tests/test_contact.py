@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import trimesh
-from helpers import count_compilations
+from helpers import count_compilations, lowest_vertex
 
 from hydrotact import HydrotactError
 from hydrotact.contact import (
@@ -511,17 +511,9 @@ def _tie_probes():
     ]
 
 
-def _lowest_point(probe, rotation_vector):
-    """How far below R's origin the probe reaches along S's z when rotated."""
-    if isinstance(probe, HalfSpace):
-        return 0.0
-    rotation = np.asarray(make_pose(np.zeros(3), rotation_vector).rotation)
-    return float(np.min(np.asarray(probe.vertices_R) @ rotation.T, axis=0)[2])
-
-
 def _poses_at_depths(probe, rotation_vector, depths, xy=(0.0, 0.0)):
     """Poses that put the probe's lowest point `depths` below the pad's top."""
-    heights = PAD_TOP - np.asarray(depths) - _lowest_point(probe, rotation_vector)
+    heights = PAD_TOP - np.asarray(depths) - lowest_vertex(probe, rotation_vector)[2]
     translations = np.column_stack([np.full_like(heights, xy[0]), np.full_like(heights, xy[1]), heights])
     return jax.vmap(make_pose)(jnp.asarray(translations), jnp.asarray(np.broadcast_to(rotation_vector, translations.shape)))
 

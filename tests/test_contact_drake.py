@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from drake_reference import OFF_AXIS_CASES, DrakeScene, drake_contact_surfaces, integrate_drake_surface, off_axis_case, pressing_plane_pose
+from helpers import lowest_vertex
 
 from hydrotact.contact import HalfSpace, compute_contact_surface, make_cylinder_probe, make_pose
 from hydrotact.field import calc_distance_field, make_pressure_field
@@ -112,10 +113,6 @@ def _tie_case(label, mesh):
 
     from hydrotact.contact import Capacity, make_box_probe
 
-    def lowest(probe, rotation_vector):
-        turned = np.asarray(probe.vertices_R) @ np.asarray(make_pose(np.zeros(3), rotation_vector).rotation).T
-        return turned[np.argmin(turned[:, 2])]
-
     down = np.array([0.0, 0.0, -1.0])
     if label == "face on a horizontal layer":  # the cylinder's tip on the 3.5 mm vertex layer
         return make_cylinder_probe(2e-3, length=6e-3), np.array([0.0, 0.0, 3.5e-3]), np.zeros(3), down, Capacity(256, 256, 5632, 2816)
@@ -125,11 +122,11 @@ def _tie_case(label, mesh):
     if label == "vertex on a vertex":  # a box corner first, on the vertex (0.55, 0.55, 3.5) mm
         box = make_box_probe((4e-3, 4e-3, 2e-3))
         turn = Rotation.align_vectors([down], [np.array([2.0, 2.0, 1.0]) / 3.0])[0].as_rotvec()
-        return box, np.array([0.55e-3, 0.55e-3, 3.5e-3]) - lowest(box, turn), turn, down, Capacity(640, 8, 4096, 256)
+        return box, np.array([0.55e-3, 0.55e-3, 3.5e-3]) - lowest_vertex(box, turn), turn, down, Capacity(640, 8, 4096, 256)
     if label == "edge along an edge":  # a box edge first, along the mesh edges y = 0, z = 3.5 mm
         box = make_box_probe((3e-3, 3e-3, 2e-3))
         turn = np.array([np.pi / 4, 0.0, 0.0])
-        corner = lowest(box, turn)
+        corner = lowest_vertex(box, turn)
         return box, np.array([0.0, -corner[1], 3.5e-3 - corner[2]]), turn, down, Capacity(288, 16, 4096, 1024)
     # "face in an interior tet face's plane" on sphere8: a box's bottom, the face 0.4 mm deep
     centroid, normal = _interior_face_below_the_top(mesh)
