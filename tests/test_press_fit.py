@@ -123,7 +123,7 @@ def test_one_log_recovers_the_shape_onsets_and_lag(one_log_fit):
     assert any("clipped" in message and "f0" in message for message in messages)
 
 
-def test_a_fit_far_from_the_noise_tries_other_shapes(one_log_fit, stand_in, monkeypatch):
+def test_a_fit_far_from_the_noise_tries_other_shapes(one_log_fit, stand_in, monkeypatch, capsys):
     """starts="auto": a fit that ends above a reduced χ² of RESTART_REDUCED_CHI2 is
     tried from the next relaxation shape, and the lowest χ² is kept. Here a first
     start of τ x 0.05 and Eᵢ/E∞ 0.01 is put before the default ones: from it alone the
@@ -134,31 +134,33 @@ def test_a_fit_far_from_the_noise_tries_other_shapes(one_log_fit, stand_in, monk
     start, which is the default fit's. (The default starts' own case: notebook 02's
     stage log cut before its gap, 2 presses, 40 % relaxation, ends at 10.8 from the
     first and at 1.01 from the second.)"""
+    from hydrotact.cli.fit import print_press_table
+    from hydrotact.sysid.lumped._press_report import make_press_report
+
     default, truth, _ = one_log_fit
     path, log, _ = stand_in["calibration"][0]
-    ends = []  # each start's own χ² at the end of its solve, before the onset scan
-    solve = press_solve_module._solve_from
-
-    def recorded(*args, **kwargs):
-        solved = solve(*args, **kwargs)
-        ends.append(float(solved[2][0]))
-        return solved
-
-    monkeypatch.setattr(press_solve_module, "_solve_from", recorded)
     monkeypatch.setattr(press_solve_module, "SHAPE_STARTS", ((0.05, 0.01), *press_solve_module.SHAPE_STARTS))
     alone = fit_press_logs([log], [str(path)], terms=2, estimate_lag=True, saturation_pa=125e3, starts=1)
-    # The first three starts, in order: the bad one, the default fit's, the next.
-    first = len(ends)
+    # The first three starts, in order: the bad one, the default fit's, the next; each
+    # start's own χ² at the end of its solve, before the onset scan.
     every = fit_press_logs([log], [str(path)], terms=2, estimate_lag=True, saturation_pa=125e3, starts=3)
-    assert every.num_starts == 3 and len(ends) == first + 3
-    bad_end, default_end = ends[first], ends[first + 1]
-    assert default.num_starts == 1 and default_end / default.dof < press_solve_module.RESTART_REDUCED_CHI2
-    assert alone.num_starts == 1 and bad_end > 1.05 * default_end and alone.chi_square > default.chi_square
+    assert every.num_starts == len(every.start_chi_squares) == 3
+    bad_end, default_end = every.start_chi_squares[:2]
+    assert default.num_starts == 1 and default.start_chi_squares[0] == pytest.approx(default_end, rel=1e-9)
+    assert default_end / default.dof < press_solve_module.RESTART_REDUCED_CHI2
+    assert alone.num_starts == 1 and alone.start_chi_squares[0] == pytest.approx(bad_end, rel=1e-9)
+    assert bad_end > 1.05 * default_end and alone.chi_square > default.chi_square
     monkeypatch.setattr(press_solve_module, "RESTART_REDUCED_CHI2", float(np.sqrt(bad_end * default_end)) / default.dof)
     again = fit_press_logs([log], [str(path)], terms=2, estimate_lag=True, saturation_pa=125e3)
-    assert again.num_starts == 2
+    assert again.num_starts == 2 and again.start_chi_squares == pytest.approx(every.start_chi_squares[:2], rel=1e-9)
     assert again.chi_square == pytest.approx(default.chi_square, rel=1e-9)
     assert every.chi_square <= again.chi_square * (1 + 1e-9)
+    # The report and the command line's table give each start's end.
+    report = make_press_report(every)
+    assert report["num_starts"] == 3 and report["start_chi_squares"] == list(every.start_chi_squares)
+    capsys.readouterr()
+    print_press_table(report)
+    assert f"fitted from 3 relaxation shapes (--starts; χ² at their ends {bad_end:,.6g}, {default_end:,.6g}," in capsys.readouterr().out
     with pytest.raises(HydrotactError, match="--starts"):
         fit_press_logs([log], [str(path)], terms=2, starts=0)
 

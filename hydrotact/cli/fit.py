@@ -187,7 +187,8 @@ def print_press_table(report: dict) -> None:
             row(f"lag {log['source']}", log["lag_s"], " s")
     Console().print(table)
     if report.get("num_starts", 1) > 1:
-        print(f"  fitted from {report['num_starts']} relaxation shapes (--starts); the lowest χ² is kept")
+        ends = ", ".join(f"{c:,.6g}" for c in report.get("start_chi_squares", []))
+        print(f"  fitted from {report['num_starts']} relaxation shapes (--starts; χ² at their ends {ends}); the lowest χ² is kept")
     for entry in report["residuals"]:
         cells = ", ".join(f"{name} {c['rms_Pa']:.3g} Pa (R² {c['r2']:.5f})" for name, c in entry["channels"].items() if c["rms_Pa"] is not None)
         print(f"  {entry['source']}: RMS residual {cells}")

@@ -85,8 +85,9 @@ class PressFit:
     predicts), `solver_chi_square` the projection's the solver minimised (which finds
     where the push max(0, ·) is on from a pass before; the two differ by where the
     push starts or ends at the final amplitudes), `dof`, `converged`, `num_steps`,
-    `solver`, `drift`, `drift_from` (where the baselines were learned), `warnings` [str]; `num_terms`; `num_starts` the shape starts
-    the fit was tried from (see SHAPE_STARTS); `law_covariance` the covariance of
+    `solver`, `drift`, `drift_from` (where the baselines were learned), `warnings` [str]; `num_terms`; `start_chi_squares` the own χ² each
+    shape start tried ended at (see SHAPE_STARTS), in order, before the onset scan of
+    the best, and `num_starts` their count; `law_covariance` the covariance of
     the channel law's parameters (see :func:`_law_covariance`), for `compare`'s
     prediction band.
     """
@@ -116,9 +117,13 @@ class PressFit:
     position_columns: tuple
     indentation: str
     estimate_lag: bool
-    num_starts: int = 1
+    start_chi_squares: tuple = ()
     law_covariance: dict | None = None
     drift_from: str = "all"
+
+    @property
+    def num_starts(self) -> int:
+        return max(len(self.start_chi_squares), 1)
 
     @property
     def reduced_chi_square(self) -> float:
@@ -232,21 +237,21 @@ def _fit_press_logs(logs, sources, *, terms, indentation, position_columns, drif
         # (of 24,000-30,000), the BIC steps between the counts are 5,400 and 530.
         # The counts' fits share one compiled program (MAX_TERMS terms, those past
         # the count off): compiling each count's was ~6 s of a cold fit's 50.
-        layout, args, solution, chi_squares, outputs, tried = fit_terms(
+        layout, args, solution, chi_squares, outputs, ends = fit_terms(
             count, prepared, len(sites), estimate_lag, lag, stepping, max_steps, starts, num_used, num_linear, scan=len(counts) == 1,
             padded_to=MAX_TERMS if len(counts) > 1 else None,
         )
         bic = chi_squares[0] + (layout.without_inactive()[0].size + num_linear) * math.log(num_used)
         if best is None or bic < best[0]:
-            best = (bic, count, layout, args, solution, chi_squares, outputs, tried)
-    _, count, layout, args, solution, chi_squares, outputs, tried = best
+            best = (bic, count, layout, args, solution, chi_squares, outputs, ends)
+    _, count, layout, args, solution, chi_squares, outputs, ends = best
     if len(counts) > 1:
         outputs = press_outputs(layout, solution.value, args, True)  # with the Jacobian
         solution, outputs, chi_squares = solve_press_scanned(layout, stepping, max_steps, None, args, solved=(solution, outputs, chi_squares))
         layout, solution, outputs = _without_inactive(layout, solution, outputs)
     return _summarise(
         layout, args, solution, chi_squares, outputs, prepared, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, position_columns, indentation,
-        num_starts=tried,
+        start_chi_squares=ends,
     )
 
 
@@ -263,7 +268,7 @@ def _without_inactive(layout, solution, outputs):
 
 def _summarise(
     layout, args, solution, chi_squares, outputs, logs, channels, sites, skipped, num_used, num_linear, solver, drift, estimate_lag, position_columns, indentation,
-    *, num_starts,
+    *, start_chi_squares,
 ) -> PressFit:
     x = solution.value
     chi_square, solver_chi_square = chi_squares
@@ -337,7 +342,7 @@ def _summarise(
         channels=channels, skipped=skipped, logs=logs, residuals=[np.asarray(r) for r in residuals], chi_square=chi_square,
         solver_chi_square=solver_chi_square, dof=dof,
         converged=converged, num_steps=int(solution.num_steps), solver=solver_name(solver), drift=drift, warnings=messages, num_terms=k,
-        position_columns=tuple(position_columns), indentation=indentation, estimate_lag=estimate_lag, num_starts=num_starts,
+        position_columns=tuple(position_columns), indentation=indentation, estimate_lag=estimate_lag, start_chi_squares=start_chi_squares,
         law_covariance=law_covariance, drift_from=logs[0].drift_from,
     )
 

@@ -113,6 +113,7 @@ def make_press_report(fit: PressFit) -> dict:
         "converged": fit.converged,
         "num_steps": fit.num_steps,
         "num_starts": fit.num_starts,
+        "start_chi_squares": [float(c) for c in fit.start_chi_squares],
         "chi_square": fit.chi_square,
         "solver_chi_square": fit.solver_chi_square,
         "dof": fit.dof,

@@ -186,8 +186,8 @@ def fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps, 
     each other's χ² (the same minimum from two shapes: what is left is the model's
     misfit, which no start removes; a real log never falls below 1.5); N: the first
     N. The best start is one that converged, if any did, with the lowest own χ².
-    Returns (the layout, args, solution, (own χ², solver's χ²), outputs, the number
-    of starts tried)."""
+    Returns (the layout, args, solution, (own χ², solver's χ²), outputs, each start's
+    own χ² at the end of its solve, before any scan, in the order tried)."""
     presses = tuple(len(log.onset_start) for log in logs)
     if padded_to is None:
         layout = PressLayout(num_terms, presses, estimate_lag)
@@ -197,14 +197,13 @@ def fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps, 
     datas = tuple(log.to_data(num_sites, responds) for log in logs)
     args = (datas, tuple(jnp.asarray(log.onset_start) for log in logs), tuple(jnp.asarray(float(lag)) for _ in logs))
     dof = max(num_used - layout.without_inactive()[0].size - num_linear, 1)
-    best, tried = None, 0
+    best = None
     candidates = SHAPE_STARTS if starts == "auto" else SHAPE_STARTS[:starts]
     ends = []
     for start in candidates if num_terms else candidates[:1]:  # no terms, no shape to start
-        tried += 1
-        doing(f"the lumped fit's solve ({num_terms} Prony terms, start {tried} of at most {len(candidates)})")
+        doing(f"the lumped fit's solve ({num_terms} Prony terms, start {len(ends) + 1} of at most {len(candidates)})")
         solved = _solve_from(layout, solver, max_steps, jnp.asarray(_initial_x(layout, logs, lag, start)), args, jacobian=scan)
-        ends.append(solved[2][0])
+        ends.append(float(solved[2][0]))
         # A solve that converged beats one stopped at its step cap (on a flat valley of
         # a term the logs cannot tell, still creeping), then the lower own χ².
         if best is None or (bool(solved[0].converged), -solved[2][0]) > (bool(best[0].converged), -best[2][0]):
@@ -215,4 +214,4 @@ def fit_terms(num_terms, logs, num_sites, estimate_lag, lag, solver, max_steps, 
             if len(ends) >= 2 and min(abs(a - b) / min(a, b) for k, a in enumerate(ends) for b in ends[:k]) < RESTART_SAME_MINIMUM:
                 break
     solution, outputs, chi_squares = solve_press_scanned(layout, solver, max_steps, None, args, solved=best) if scan else best
-    return layout, args, solution, chi_squares, outputs, tried
+    return layout, args, solution, chi_squares, outputs, tuple(ends)
