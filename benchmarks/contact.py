@@ -21,9 +21,9 @@ checks they agree).
   compilation.
 - Timed in turn: `--rounds` rounds, each one pass of Drake's and one call of each
   batch; the table gives the medians over the rounds, and the range of each rate and
-  of the rounds' own ratios (on a 2-core CPU hydrotact's rate moves up to 2x
-  between calls, Drake's 10 %). `taskset -c 0` before the command compares one core
-  against one core.
+  of the rounds' own ratios (on a 2-core CPU hydrotact's rate, on two threads,
+  moved up to 2x between calls, Drake's less: benchmarks/RESULTS.md). `taskset -c 0`
+  before the command compares one core against one core.
 
 Run: `.venv/bin/python benchmarks/contact.py [--batches 1 64 1024] [--cases box sphere8]`.
 """
