@@ -160,10 +160,9 @@ def _drake_timer(vtk_path, other, poses):
     return time_once
 
 
-def _wrench(field, other, capacity):
+def _wrench(field, clusters, other, capacity):
     """hydrotact's timed work for one pose row: the surface's force, torque, area and
     whether its buffers overflowed."""
-    clusters = make_tet_clusters(field.vertices, field.tets)
 
     def wrench(row):
         surface = calc_contact_surface(field, other, make_pose(row[:3], row[3:]), capacity, clusters)
@@ -173,10 +172,10 @@ def _wrench(field, other, capacity):
     return wrench
 
 
-def _ours_timer(field, other, poses, capacity, chunk):
+def _ours_timer(field, clusters, other, poses, capacity, chunk):
     """A function timing one jitted call of hydrotact's surfaces and wrenches over
     `poses` (seconds a batch), compiled and checked for overflow first."""
-    time_once, result = batched_over_poses(_wrench(field, other, capacity), poses, chunk)
+    time_once, result = batched_over_poses(_wrench(field, clusters, other, capacity), poses, chunk)
     assert not bool(np.any(result[3])), "capacity too small for the benchmark poses"
     return time_once
 
@@ -234,6 +233,7 @@ def main():
     print(f"machine: {machine}")
     print("| case | batch | hydrotact surfaces/s (rounds' range) | Drake surfaces/s (rounds' range) | ratio of medians (rounds' range) |\n|---|---:|---:|---:|---:|")
     rows, profiled = [], {}
+    chunks = {batch: min(args.chunk or (CPU_POSE_GROUP if jax.default_backend() == "cpu" else batch), batch) for batch in args.batches}
     largest = max(args.batches)
     with tempfile.TemporaryDirectory() as scratch:
         probes = {name: make() for name, make in PROBES.items()}
@@ -247,8 +247,9 @@ def main():
             if sensor not in fields:
                 vtk = write_mesh(make_seed_mesh(sensor), Path(scratch) / f"{sensor}.vtk")
                 mesh, _ = read_mesh(vtk)
-                fields[sensor] = (vtk, make_pressure_field(mesh, calc_distance_field(mesh), MODULUS))
-            vtk, field = fields[sensor]
+                field = make_pressure_field(mesh, calc_distance_field(mesh), MODULUS)
+                fields[sensor] = (vtk, field, make_tet_clusters(field.vertices, field.tets))
+            vtk, field, clusters = fields[sensor]
             ours_other = HalfSpace() if probe_name == "half-space" else probes[probe_name]
             drake_other = DrakeHalfSpace() if probe_name == "half-space" else paths[probe_name]
             poses = draw(largest, probes.get(probe_name), case_rng(args.seed, case))
@@ -256,9 +257,8 @@ def main():
             # Start small and let compute_contact_surface grow the buffers to every pose of the case.
             X_SO = jax.vmap(make_pose)(jnp.asarray(poses[:, :3]), jnp.asarray(poses[:, 3:]))
             _, capacity = compute_contact_surface(field, ours_other, X_SO, Capacity(64, 64, 64, 256))
-            chunks = {batch: min(args.chunk or (CPU_POSE_GROUP if jax.default_backend() == "cpu" else batch), batch) for batch in args.batches}
-            ours = {batch: _ours_timer(field, ours_other, poses[:batch], capacity, chunks[batch]) for batch in args.batches}
-            profiled[case] = (field, ours_other, poses, capacity)
+            ours = {batch: _ours_timer(field, clusters, ours_other, poses[:batch], capacity, chunks[batch]) for batch in args.batches}
+            profiled[case] = (field, clusters, ours_other, poses, capacity)
             # Timed in turn, so that both see the same moments of the machine (hydrotact's
             # rate, on two threads, moves more between moments than Drake's on one).
             drake_rates, our_rates = [], {batch: [] for batch in args.batches}
@@ -290,9 +290,9 @@ def main():
         # The case furthest under Drake at the smallest batch of 64 or more: where its time goes.
         batch = min((b for b in args.batches if b >= 64), default=min(args.batches))
         slowest = min((row for row in rows if row["batch"] == batch), key=lambda row: row["ratio"])
-        field, other, poses, capacity = profiled[slowest["case"]]
+        field, clusters, other, poses, capacity = profiled[slowest["case"]]
         chunk = slowest["chunk"]
-        by_buffer, fusions = time_by_buffer(_wrench(field, other, capacity), poses[: batch - batch % chunk], capacity, chunk)
+        by_buffer, fusions = time_by_buffer(_wrench(field, clusters, other, capacity), poses[: batch - batch % chunk], capacity, chunk)
         print(f"profile of the case furthest under Drake, {slowest['case']} (batch {batch}, buffers {capacity.sizes}), XLA's fusion times:")
         print("  us a pose by the buffer a fusion's output is sized by: " + ", ".join(f"{k} {v:.0f}" for k, v in by_buffer.items()))
         print("  costliest fusions: " + "; ".join(f"{name} {shape} {us:.0f} us" for us, name, shape in fusions))
